@@ -1,0 +1,57 @@
+// Settings of a SensorWorld. Defaults live here, units in the comments; validate() names the
+// first setting out of range. Every [beyond] item can be switched back to the thesis behaviour.
+#pragma once
+
+#include "psc/budget.h"
+#include "psc/partition.h"
+
+namespace psc {
+
+enum class Flagging {
+  Sensors,           ///< thesis §3.5: particles of different bodies closer than μ flag their regions
+  SensorsAndBounds,  ///< [beyond] also flag region pairs whose particle-centred bounding spheres
+                     ///< (+ margins and motion) overlap: no contact inside the radius can be missed
+};
+
+enum class AreaEstimator {
+  FourDirectionWalk,  ///< thesis §3.6: walk ±X, ±Y in the particle's tangent plane, area = rectangle
+  TrueArea,           ///< [beyond] the region's share of triangle areas (default)
+};
+
+struct RepartitionSettings {
+  bool enabled = true;
+  AreaEstimator estimator = AreaEstimator::TrueArea;
+  int check_every = 10;                ///< steps between checks of a body (≥ 1)
+  double area_trigger = 1.5;           ///< repartition when a region's area > area_trigger × A* (≥ 1; thesis: 1)
+  double edge_stretch_trigger = 1.5;   ///< [beyond] ... or the longest edge > trigger × its length at
+                                       ///< partitioning (≥ 1; 0 = off); also refreshes μ
+};
+
+struct SensorSettings {
+  /// μ_geom = mu_edge_factor × the larger mean edge length of the two bodies (length units).
+  /// Thesis §5.1.4 proves μ must be at least half the mean edge: factor ≥ 0.5.
+  double mu_edge_factor = 1.0;
+  /// Effective radius of the pull, length units. 0 = auto: the largest body's bounding diameter
+  /// (so touching bodies always see each other). Always clamped above the largest μ.
+  double r_eff = 0.0;
+  /// Movement rounds per step before giving up (≥ 1); a hit is counted in StepStats.
+  int max_rounds = 64;
+  Flagging flagging = Flagging::SensorsAndBounds;
+  /// Candidate sets extend by one vertex ring around the flagged regions (thesis §3.5).
+  bool one_ring = true;
+  /// A vertex v of A counts as touching a triangle of B within
+  ///   margin_A + margin_B + motion_factor·|x_v − x_v,prev|     (length units)
+  /// Bullet's CollideVF_SS uses 2. Only used when a body has a previous-position view. ≥ 0.
+  double motion_factor = 2.0;
+  /// Build (vertex, triangle) candidate pairs in step(); off = flagged pairs only.
+  bool build_candidates = true;
+
+  PartitionSettings partition;
+  DecompositionSettings decomposition;
+  RepartitionSettings repartition;
+};
+
+/// Throws psc::Error(InvalidSettings) naming the first setting out of range.
+void validate(const SensorSettings& settings);
+
+}  // namespace psc

@@ -1,0 +1,159 @@
+// A world of sensor bodies: add, remove, update after deformation, and one step() that moves the
+// particles, flags region pairs and builds the candidate (vertex, triangle) pairs for the exact
+// test. Request in, result out; all state lives in the world (no globals), so several worlds can
+// be stepped in several threads.
+#pragma once
+
+#include "psc/budget.h"
+#include "psc/mesh.h"
+#include "psc/partition.h"
+#include "psc/settings.h"
+#include "psc/types.h"
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace psc {
+
+/// What a body is made of. Positions are read in place through the views on every step, so the
+/// memory behind them must stay valid until the next setPositions() / removeBody().
+struct BodyDesc {
+  std::vector<Triangle> triangles;
+  PositionView positions;
+  /// Positions at the previous step (optional): gives the motion term of the contact radius.
+  PositionView previous;
+  double margin = 0.0;            ///< collision margin of this body, length units (≥ 0)
+  std::size_t particles = 0;      ///< > 0: override the particle budget
+  bool deformable = true;         ///< false: a rigid mesh, never checked for repartitioning
+  /// Optional convex parts (e.g. shared by copies of one mesh); computed with HACD when empty.
+  std::shared_ptr<const ConvexParts> parts;
+  std::string name;               ///< used in error messages and reports
+};
+
+/// Where a particle is.
+struct ParticleState {
+  BodyId body = kInvalidBody;
+  Index region = 0;
+  Index vertex = 0;
+};
+
+/// Two regions of two different bodies flagged in one step; body_a < body_b.
+struct FlaggedPair {
+  BodyId body_a = kInvalidBody;
+  Index region_a = 0;
+  BodyId body_b = kInvalidBody;
+  Index region_b = 0;
+  bool by_sensors = false;  ///< particles closer than μ (thesis)
+  bool by_bounds = false;   ///< bounding spheres overlap ([beyond])
+  bool operator==(const FlaggedPair& o) const {
+    return body_a == o.body_a && region_a == o.region_a && body_b == o.body_b && region_b == o.region_b &&
+           by_sensors == o.by_sensors && by_bounds == o.by_bounds;
+  }
+};
+
+/// A (vertex of one body, triangle of another) pair to hand to the exact test. Each appears at
+/// most once per step. Sorted by (vertex_body, triangle_body, vertex, triangle).
+struct CandidatePair {
+  BodyId vertex_body = kInvalidBody;
+  Index vertex = 0;
+  BodyId triangle_body = kInvalidBody;
+  Index triangle = 0;
+  bool operator==(const CandidatePair& o) const {
+    return vertex_body == o.vertex_body && vertex == o.vertex && triangle_body == o.triangle_body &&
+           triangle == o.triangle;
+  }
+};
+
+/// The candidate sets of one flagged pair in one direction (thesis §3.5): the vertices of region I
+/// (+ one ring) of `vertex_body` and the triangles touching region J (+ one ring) of `triangle_body`.
+struct CandidateSet {
+  BodyId vertex_body = kInvalidBody;
+  BodyId triangle_body = kInvalidBody;
+  std::vector<Index> vertices;   ///< sorted
+  std::vector<Index> triangles;  ///< sorted
+};
+
+struct StepStats {
+  std::size_t bodies = 0;
+  std::size_t particles = 0;
+  int rounds = 0;                    ///< movement rounds this step (Jacobi sweeps)
+  std::size_t round_cap_hits = 0;    ///< 1 when max_rounds stopped the movement before it was stable
+  std::size_t particle_moves = 0;    ///< hops made, summed over particles and rounds
+  std::size_t neighbor_pairs = 0;    ///< particle pairs of different bodies within R_eff (last round)
+  std::size_t flagged_pairs = 0;
+  std::size_t flagged_by_sensors = 0;
+  std::size_t flagged_by_bounds_only = 0;  ///< flagged only because of the bounding spheres
+  std::size_t candidate_vertices = 0;      ///< summed over flagged pairs and directions
+  std::size_t candidate_triangles = 0;     ///< summed over flagged pairs and directions
+  std::size_t candidate_probes = 0;        ///< (vertex, triangle) box tests made in the pair grids
+  std::size_t candidate_pairs = 0;         ///< unique pairs handed to the exact test
+  std::size_t repartitions = 0;            ///< bodies re-partitioned this step
+  double r_eff = 0.0;                      ///< R_eff used this step (length units)
+  double ms_sensors = 0.0;                 ///< particle movement (wall clock)
+  double ms_flagging = 0.0;                ///< flagging incl. region bounds
+  double ms_candidates = 0.0;              ///< candidate pairs
+  double ms_repartition = 0.0;             ///< repartition checks and repartitions
+  double ms_total = 0.0;
+};
+
+struct StepResult {
+  std::vector<FlaggedPair> flagged;        ///< sorted by (body_a, region_a, body_b, region_b)
+  std::vector<CandidatePair> candidates;   ///< see CandidatePair
+  StepStats stats;
+};
+
+class SensorWorld {
+ public:
+  explicit SensorWorld(const SensorSettings& settings = {});  ///< validates the settings
+  ~SensorWorld();
+  SensorWorld(SensorWorld&&) noexcept;
+  SensorWorld& operator=(SensorWorld&&) noexcept;
+  SensorWorld(const SensorWorld&) = delete;
+  SensorWorld& operator=(const SensorWorld&) = delete;
+
+  /// Validates the mesh (psc::Error naming the problem) and adds it. Partitioning is deferred to
+  /// the next step(), when the scene's particle budget is known.
+  BodyId addBody(const BodyDesc& desc);
+  /// Forgets the body. Throws psc::Error(InvalidArgument) for an unknown id.
+  void removeBody(BodyId id);
+  bool hasBody(BodyId id) const;
+  std::vector<BodyId> bodyIds() const;  ///< ascending
+
+  /// New views after the owner moved its memory (same vertex count; else psc::Error).
+  void setPositions(BodyId id, const PositionView& positions, const PositionView& previous = {});
+  void setMargin(BodyId id, double margin);
+  /// The mesh itself changed (vertex count, triangles): rebuilds the topology and repartitions.
+  void replaceMesh(BodyId id, std::vector<Triangle> triangles, const PositionView& positions,
+                   const PositionView& previous = {});
+
+  /// Moves the particles until stable, flags region pairs, builds candidate pairs, and checks
+  /// whether bodies need repartitioning. Deterministic.
+  const StepResult& step();
+  const StepResult& lastResult() const;
+
+  /// The candidate sets of a flagged pair, vertices of `vertex_body` against triangles of the other.
+  CandidateSet candidateSet(const FlaggedPair& pair, BodyId vertex_body) const;
+
+  /// μ between two bodies with the current margins (without the per-vertex motion term):
+  /// μ = mu_edge_factor · max(ē_A, ē_B) + margin_A + margin_B.
+  double mu(BodyId a, BodyId b) const;
+
+  // --- inspection (after the body's first step) ---
+  const MeshTopology& topology(BodyId id) const;
+  const Partition& partition(BodyId id) const;   ///< psc::Error before the first step
+  std::vector<ParticleState> particles() const;  ///< all particles, by body then region
+  std::size_t particleCount(BodyId id) const;
+  std::size_t repartitionCount(BodyId id) const;  ///< times re-partitioned after the first
+  /// Bytes the midphase keeps for this body: topology, regions, particles (no positions).
+  std::size_t memoryBytes(BodyId id) const;
+  const MeshReport& report(BodyId id) const;
+  const SensorSettings& settings() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace psc
