@@ -1,1 +1,595 @@
-// stub
+#include "psc/world.h"
+
+#include "body.h"
+#include "candidates.h"
+#include "psc/error.h"
+#include "psc/hash_grid.h"
+#include "psc/repartition.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <sstream>
+
+namespace psc {
+
+using detail::Body;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+bool flaggedLess(const FlaggedPair& a, const FlaggedPair& b) {
+  if (a.body_a != b.body_a) return a.body_a < b.body_a;
+  if (a.region_a != b.region_a) return a.region_a < b.region_a;
+  if (a.body_b != b.body_b) return a.body_b < b.body_b;
+  return a.region_b < b.region_b;
+}
+
+bool candidateLess(const CandidatePair& a, const CandidatePair& b) {
+  if (a.vertex_body != b.vertex_body) return a.vertex_body < b.vertex_body;
+  if (a.triangle_body != b.triangle_body) return a.triangle_body < b.triangle_body;
+  if (a.vertex != b.vertex) return a.vertex < b.vertex;
+  return a.triangle < b.triangle;
+}
+
+}  // namespace
+
+struct SensorWorld::Impl {
+  SensorSettings settings;
+  std::map<BodyId, std::unique_ptr<Body>> bodies;  // ordered by id: deterministic iteration
+  BodyId next_id = 0;
+  bool membership_changed = false;
+  StepResult result;
+
+  // Particle arrays for one step, ordered by (body id, region).
+  std::vector<Body*> p_body;
+  std::vector<Index> p_region;
+  std::vector<Vec3> p_pos;
+  std::vector<Index> p_dest;
+  std::vector<double> p_motion;
+  std::vector<Index> near;
+  PointHashGrid grid;
+  detail::PairGridScratch pair_scratch;
+  std::vector<Index> vset, tset;
+  std::vector<std::uint64_t> keys;
+
+  Body& get(BodyId id) {
+    auto it = bodies.find(id);
+    if (it == bodies.end()) throw Error(ErrorCode::InvalidArgument, "unknown body id " + std::to_string(id));
+    return *it->second;
+  }
+  const Body& get(BodyId id) const { return const_cast<Impl*>(this)->get(id); }
+
+  double rEff() const {
+    double r = settings.r_eff;
+    double max_diameter = 0.0, max_edge = 0.0, max_margin = 0.0;
+    for (const auto& kv : bodies) {
+      max_diameter = std::max(max_diameter, kv.second->diameter);
+      max_edge = std::max(max_edge, kv.second->mean_edge);
+      max_margin = std::max(max_margin, kv.second->margin);
+    }
+    if (r == 0.0) r = max_diameter;
+    // §5.1.3: a touching pair is only pulled together when R_eff exceeds μ.
+    const double max_mu = settings.mu_edge_factor * max_edge + 2.0 * max_margin;
+    return std::max(r, 1.01 * max_mu + 1e-12);
+  }
+
+  void partitionBody(Body& b, std::size_t count);
+  void preparePartitions(StepStats& stats);
+  void checkRepartition(Body& b, StepStats& stats);
+  void moveParticles(StepStats& stats, double r_eff);
+  void flagBySensors(double r_eff, StepStats& stats);
+  void flagByBounds();
+  void buildCandidates(StepStats& stats);
+};
+
+void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
+  const bool again = b.partitioned;
+  b.partition = partitionLBG(*b.topology, b.positions, count, settings.partition);
+  b.regions = detail::buildRegionLists(*b.topology, b.partition.region_of, b.partition.regionCount());
+  b.particle_vertex = b.partition.seed_vertex;
+  const EdgeStats es = edgeStats(*b.topology, b.positions);
+  b.mean_edge = es.mean;
+  b.max_edge = es.max;
+  const std::vector<double> areas =
+      regionAreas(*b.topology, b.positions, b.partition, b.particle_vertex, settings.repartition.estimator);
+  b.area_star = areas.empty() ? 0.0 : *std::max_element(areas.begin(), areas.end());
+  b.diameter = 2.0 * bounds(b.positions).radius;
+  b.rho.assign(b.regionCount(), 0.0);
+  b.motion.assign(b.regionCount(), 0.0);
+  b.budget = count;
+  b.partitioned = true;
+  b.steps_since_check = 0;
+  if (again) ++b.repartitions;
+}
+
+void SensorWorld::Impl::preparePartitions(StepStats& stats) {
+  bool any_new = membership_changed;
+  for (const auto& kv : bodies) any_new = any_new || !kv.second->partitioned;
+  if (!any_new) return;
+  std::vector<BudgetBody> budget_in;
+  budget_in.reserve(bodies.size());
+  for (auto& kv : bodies) {
+    Body& b = *kv.second;
+    if (!b.parts)
+      b.parts = std::make_shared<const ConvexParts>(decomposeConvex(*b.topology, b.positions, settings.decomposition));
+    budget_in.push_back({*b.parts, b.particle_override});
+  }
+  const std::vector<std::size_t> budget = particleBudget(budget_in);
+  std::size_t k = 0;
+  for (auto& kv : bodies) {
+    Body& b = *kv.second;
+    const std::size_t count = std::clamp<std::size_t>(budget[k++], 1, b.vertices_in_triangles);
+    if (!b.partitioned || count != b.budget) {
+      const bool again = b.partitioned;
+      partitionBody(b, count);
+      if (again) ++stats.repartitions;
+    }
+  }
+  membership_changed = false;
+}
+
+void SensorWorld::Impl::checkRepartition(Body& b, StepStats& stats) {
+  const RepartitionSettings& rs = settings.repartition;
+  if (!rs.enabled || !b.deformable || ++b.steps_since_check < rs.check_every) return;
+  b.steps_since_check = 0;
+  bool trigger = false;
+  if (rs.edge_stretch_trigger > 0.0) {
+    const EdgeStats es = edgeStats(*b.topology, b.positions);
+    trigger = es.max > rs.edge_stretch_trigger * b.max_edge;
+  }
+  if (!trigger) {
+    const std::vector<double> areas = regionAreas(*b.topology, b.positions, b.partition, b.particle_vertex, rs.estimator);
+    trigger = !areas.empty() && *std::max_element(areas.begin(), areas.end()) > rs.area_trigger * b.area_star;
+  }
+  if (trigger) {
+    partitionBody(b, b.budget);
+    ++stats.repartitions;
+  }
+}
+
+void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
+  const std::size_t n = p_pos.size();
+  double slack = 0.0;  // a candidate vertex lies up to one (stretched) edge from its particle
+  for (const auto& kv : bodies) slack = std::max(slack, kv.second->max_edge);
+  slack *= std::max(1.0, settings.repartition.edge_stretch_trigger);
+  const double reach = r_eff + slack;
+  const double reach2 = reach * reach;
+  const double r_eff2 = r_eff * r_eff;
+  const double floor2 = 1e-12 * r_eff2;  // Φ stays finite when two particles coincide
+
+  p_dest.resize(n);
+  for (int round = 0; round < settings.max_rounds; ++round) {
+    grid.build(p_pos, reach);
+    std::size_t moved = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      Body& b = *p_body[i];
+      const Index region = p_region[i];
+      const Index cur = b.particle_vertex[region];
+      p_dest[i] = cur;
+      near.clear();
+      grid.forEachCandidate(p_pos[i], [&](Index j) {
+        if (p_body[j] != &b && (p_pos[j] - p_pos[i]).squaredNorm() < reach2) near.push_back(j);
+      });
+      if (near.empty()) continue;  // no pull: the particle stays
+      const auto phi = [&](const Vec3& q) {
+        double sum = 0.0;
+        for (Index j : near) {
+          const double d2 = (q - p_pos[j]).squaredNorm();
+          if (d2 < r_eff2) sum += 1.0 / std::max(d2, floor2);
+        }
+        return sum;
+      };
+      double best = phi(p_pos[i]);
+      // Neighbours are sorted ascending and only a strictly larger pull moves the particle:
+      // ties stay, then lowest index, so runs are deterministic.
+      for (Index u : b.topology->neighbors(cur)) {
+        if (b.partition.region_of[u] != region) continue;
+        const double f = phi(b.positions[u]);
+        if (f > best) {
+          best = f;
+          p_dest[i] = u;
+        }
+      }
+      if (p_dest[i] != cur) ++moved;
+    }
+    stats.rounds = round + 1;
+    if (moved == 0) return;
+    stats.particle_moves += moved;
+    // Jacobi: every destination was chosen from the same positions; now all move at once.
+    for (std::size_t i = 0; i < n; ++i) {
+      p_body[i]->particle_vertex[p_region[i]] = p_dest[i];
+      p_pos[i] = p_body[i]->positions[p_dest[i]];
+    }
+  }
+  stats.round_cap_hits = 1;
+}
+
+void SensorWorld::Impl::flagBySensors(double r_eff, StepStats& stats) {
+  const std::size_t n = p_pos.size();
+  double max_edge = 0.0, max_margin = 0.0, max_motion = 0.0;
+  for (const auto& kv : bodies) {
+    max_edge = std::max(max_edge, kv.second->mean_edge);
+    max_margin = std::max(max_margin, kv.second->margin);
+  }
+  p_motion.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    p_motion[i] = p_body[i]->vertexMotion(p_body[i]->particle_vertex[p_region[i]]);
+    max_motion = std::max(max_motion, p_motion[i]);
+  }
+  const double max_mu = settings.mu_edge_factor * max_edge + 2.0 * max_margin + settings.motion_factor * max_motion;
+  grid.build(p_pos, std::max(r_eff, max_mu));
+  const double r_eff2 = r_eff * r_eff;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Body& bi = *p_body[i];
+    grid.forEachCandidate(p_pos[i], [&](Index j) {
+      const Body& bj = *p_body[j];
+      if (j <= i || &bj == &bi) return;
+      const double d2 = (p_pos[j] - p_pos[i]).squaredNorm();
+      if (d2 < r_eff2) ++stats.neighbor_pairs;
+      const double mu = settings.mu_edge_factor * std::max(bi.mean_edge, bj.mean_edge) + bi.margin + bj.margin +
+                        settings.motion_factor * std::max(p_motion[i], p_motion[j]);
+      if (d2 < mu * mu) {
+        FlaggedPair f;
+        const bool swap = bj.id < bi.id;
+        f.body_a = swap ? bj.id : bi.id;
+        f.region_a = swap ? p_region[j] : p_region[i];
+        f.body_b = swap ? bi.id : bj.id;
+        f.region_b = swap ? p_region[i] : p_region[j];
+        f.by_sensors = true;
+        result.flagged.push_back(f);
+      }
+    });
+  }
+}
+
+void SensorWorld::Impl::flagByBounds() {
+  struct Sphere {
+    Body* body;
+    Index region;
+    Vec3 center;
+    double rho, motion, lo, hi;
+  };
+  std::vector<Sphere> spheres;
+  spheres.reserve(p_pos.size());
+  for (auto& kv : bodies) {
+    Body& b = *kv.second;
+    for (Index r = 0; r < b.regionCount(); ++r) {
+      const Vec3 c = b.positions[b.particle_vertex[r]];
+      double rho2 = 0.0, motion = 0.0;
+      bool finite = true;  // std::max swallows NaN, so non-finite input is tracked on the side
+      for (Index v : b.regions.vertices.row(r)) {
+        const Vec3 x = b.positions[v];
+        const double d2 = (x - c).squaredNorm();
+        finite = finite && std::isfinite(d2);
+        rho2 = std::max(rho2, d2);
+        if (!b.previous.empty()) motion = std::max(motion, (x - b.previous[v]).norm());
+      }
+      for (Index v : b.regions.ring.row(r)) {
+        const double d2 = (b.positions[v] - c).squaredNorm();
+        finite = finite && std::isfinite(d2);
+        rho2 = std::max(rho2, d2);
+      }
+      if (!finite || !std::isfinite(motion)) {
+        checkFinite(b.positions, b.label());
+        if (!b.previous.empty()) checkFinite(b.previous, b.label() + " (previous positions)");
+      }
+      b.rho[r] = std::sqrt(rho2);
+      b.motion[r] = motion;
+      spheres.push_back({&b, r, c, b.rho[r], motion, 0.0, 0.0});
+    }
+  }
+  if (spheres.size() < 2) return;
+  // Sweep and prune along the axis where the centres spread most.
+  Vec3 mean = Vec3::Zero();
+  for (const Sphere& s : spheres) mean += s.center;
+  mean /= static_cast<double>(spheres.size());
+  Vec3 var = Vec3::Zero();
+  for (const Sphere& s : spheres) var += (s.center - mean).cwiseAbs2();
+  int axis = 0;
+  if (var[1] > var[axis]) axis = 1;
+  if (var[2] > var[axis]) axis = 2;
+  for (Sphere& s : spheres) {
+    const double reach = s.rho + s.body->margin + settings.motion_factor * s.motion;
+    s.lo = s.center[axis] - reach;
+    s.hi = s.center[axis] + reach;
+  }
+  std::stable_sort(spheres.begin(), spheres.end(), [](const Sphere& a, const Sphere& b) { return a.lo < b.lo; });
+  for (std::size_t i = 0; i < spheres.size(); ++i) {
+    const Sphere& a = spheres[i];
+    for (std::size_t j = i + 1; j < spheres.size() && spheres[j].lo <= a.hi; ++j) {
+      const Sphere& b = spheres[j];
+      if (a.body == b.body) continue;
+      // A vertex of one region within the contact radius of a triangle touching the other lies
+      // within this distance of both particles (triangles touching J have all their vertices in
+      // J ∪ ring(J), all within ρ_J), so the test misses no contact.
+      const double limit = a.rho + b.rho + a.body->margin + b.body->margin +
+                           settings.motion_factor * std::max(a.motion, b.motion);
+      if ((a.center - b.center).squaredNorm() > limit * limit) continue;
+      FlaggedPair f;
+      const bool swap = b.body->id < a.body->id;
+      f.body_a = swap ? b.body->id : a.body->id;
+      f.region_a = swap ? b.region : a.region;
+      f.body_b = swap ? a.body->id : b.body->id;
+      f.region_b = swap ? a.region : b.region;
+      f.by_bounds = true;
+      result.flagged.push_back(f);
+    }
+  }
+}
+
+void SensorWorld::Impl::buildCandidates(StepStats& stats) {
+  std::vector<CandidatePair>& out = result.candidates;
+  detail::CandidateCounters counters;
+  const auto direction = [&](const Body& vb, Index vregion, const Body& tb, Index tregion) {
+    detail::regionVertexSet(vb, vregion, settings.one_ring, vset);
+    detail::regionTriangleSet(tb, tregion, settings.one_ring, tset);
+    keys.clear();
+    detail::collectCandidates(vb, vset, tb, tset, vb.margin + tb.margin, settings.motion_factor, pair_scratch, keys,
+                              counters);
+    for (std::uint64_t k : keys)
+      out.push_back({vb.id, static_cast<Index>(k >> 32), tb.id, static_cast<Index>(k & 0xFFFFFFFFu)});
+  };
+  for (const FlaggedPair& f : result.flagged) {
+    const Body& a = get(f.body_a);
+    const Body& b = get(f.body_b);
+    direction(a, f.region_a, b, f.region_b);
+    direction(b, f.region_b, a, f.region_a);
+  }
+  std::sort(out.begin(), out.end(), candidateLess);
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  stats.candidate_vertices = counters.vertices;
+  stats.candidate_triangles = counters.triangles;
+  stats.candidate_probes = counters.probes;
+  stats.candidate_pairs = out.size();
+}
+
+// ------------------------------------------------------------------------------------------------
+
+SensorWorld::SensorWorld(const SensorSettings& settings) : impl_(std::make_unique<Impl>()) {
+  validate(settings);
+  impl_->settings = settings;
+}
+SensorWorld::~SensorWorld() = default;
+SensorWorld::SensorWorld(SensorWorld&&) noexcept = default;
+SensorWorld& SensorWorld::operator=(SensorWorld&&) noexcept = default;
+
+namespace {
+
+[[noreturn]] void badMargin(const std::string& label, double margin) {
+  std::ostringstream s;
+  s << label << ": margin = " << margin << " must be finite and not negative";
+  throw Error(ErrorCode::InvalidSettings, s.str());
+}
+
+// Validates a body description completely and builds its topology; nothing is partitioned yet.
+std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
+  auto b = std::make_unique<Body>();
+  b->id = id;
+  b->name = desc.name;
+  const std::string label = b->label();
+  if (!std::isfinite(desc.margin) || desc.margin < 0.0) badMargin(label, desc.margin);
+  try {
+    b->topology.emplace(desc.triangles, desc.positions.size());
+  } catch (const Error& e) {
+    throw Error(e.code(), label + ": " + std::string(e.what()).substr(std::string(toString(e.code())).size() + 2));
+  }
+  b->report = validate(*b->topology, desc.positions, label);
+  if (b->report.degenerate_triangles == b->topology->triangleCount())
+    throw Error(ErrorCode::InvalidMesh, label + ": all " + std::to_string(b->topology->triangleCount()) +
+                                            " triangles are degenerate (zero area)");
+  if (!desc.previous.empty()) {
+    if (desc.previous.size() != desc.positions.size())
+      throw Error(ErrorCode::InvalidArgument, label + ": the previous-position view has " +
+                                                  std::to_string(desc.previous.size()) + " vertices, not " +
+                                                  std::to_string(desc.positions.size()));
+    checkFinite(desc.previous, label + " (previous positions)");
+  }
+  for (Index v = 0; v < b->topology->vertexCount(); ++v)
+    if (!b->topology->vertexTriangles(v).empty()) ++b->vertices_in_triangles;
+  if (desc.particles > b->vertices_in_triangles)
+    throw Error(ErrorCode::InvalidSettings, label + ": particles = " + std::to_string(desc.particles) +
+                                                " exceeds the " + std::to_string(b->vertices_in_triangles) +
+                                                " vertices that lie in triangles");
+  if (desc.parts && desc.parts->part_of.size() != desc.positions.size())
+    throw Error(ErrorCode::InvalidArgument, label + ": the given convex parts label " +
+                                                std::to_string(desc.parts->part_of.size()) + " vertices, not " +
+                                                std::to_string(desc.positions.size()));
+  b->positions = desc.positions;
+  b->previous = desc.previous;
+  b->margin = desc.margin;
+  b->particle_override = desc.particles;
+  b->deformable = desc.deformable;
+  b->parts = desc.parts;
+  return b;
+}
+
+}  // namespace
+
+BodyId SensorWorld::addBody(const BodyDesc& desc) {
+  const BodyId id = impl_->next_id;
+  impl_->bodies.emplace(id, makeBody(id, desc));
+  ++impl_->next_id;
+  impl_->membership_changed = true;
+  return id;
+}
+
+void SensorWorld::removeBody(BodyId id) {
+  impl_->get(id);
+  impl_->bodies.erase(id);
+  impl_->membership_changed = true;
+}
+
+bool SensorWorld::hasBody(BodyId id) const { return impl_->bodies.count(id) != 0; }
+
+std::vector<BodyId> SensorWorld::bodyIds() const {
+  std::vector<BodyId> ids;
+  for (const auto& kv : impl_->bodies) ids.push_back(kv.first);
+  return ids;
+}
+
+void SensorWorld::setPositions(BodyId id, const PositionView& positions, const PositionView& previous) {
+  Body& b = impl_->get(id);
+  if (positions.size() != b.topology->vertexCount() || positions.empty())
+    throw Error(ErrorCode::InvalidArgument, b.label() + ": setPositions got " + std::to_string(positions.size()) +
+                                                " vertices but the mesh has " +
+                                                std::to_string(b.topology->vertexCount()) + " (use replaceMesh)");
+  if (!previous.empty() && previous.size() != positions.size())
+    throw Error(ErrorCode::InvalidArgument, b.label() + ": the previous-position view has " +
+                                                std::to_string(previous.size()) + " vertices, not " +
+                                                std::to_string(positions.size()));
+  b.positions = positions;
+  b.previous = previous;
+}
+
+void SensorWorld::setMargin(BodyId id, double margin) {
+  Body& b = impl_->get(id);
+  if (!std::isfinite(margin) || margin < 0.0) badMargin(b.label(), margin);
+  b.margin = margin;
+}
+
+void SensorWorld::replaceMesh(BodyId id, std::vector<Triangle> triangles, const PositionView& positions,
+                              const PositionView& previous) {
+  Body& old = impl_->get(id);
+  BodyDesc desc;
+  desc.triangles = std::move(triangles);
+  desc.positions = positions;
+  desc.previous = previous;
+  desc.margin = old.margin;
+  desc.particles = old.particle_override;
+  desc.deformable = old.deformable;
+  desc.name = old.name;
+  std::unique_ptr<Body> fresh = makeBody(id, desc);  // the old body stays if this throws
+  fresh->repartitions = old.repartitions + 1;
+  impl_->bodies[id] = std::move(fresh);
+  impl_->membership_changed = true;
+}
+
+const StepResult& SensorWorld::step() {
+  Impl& w = *impl_;
+  const auto t_start = Clock::now();
+  StepResult& res = w.result;
+  res.flagged.clear();
+  res.candidates.clear();
+  res.stats = StepStats{};
+  StepStats& st = res.stats;
+
+  auto t = Clock::now();
+  w.preparePartitions(st);
+  for (auto& kv : w.bodies) w.checkRepartition(*kv.second, st);
+  st.ms_repartition = msSince(t);
+
+  st.bodies = w.bodies.size();
+  w.p_body.clear();
+  w.p_region.clear();
+  w.p_pos.clear();
+  for (auto& kv : w.bodies) {
+    Body& b = *kv.second;
+    for (Index r = 0; r < b.regionCount(); ++r) {
+      w.p_body.push_back(&b);
+      w.p_region.push_back(r);
+      const Vec3 p = b.positions[b.particle_vertex[r]];
+      if (!p.allFinite()) checkFinite(b.positions, b.label());
+      w.p_pos.push_back(p);
+    }
+  }
+  st.particles = w.p_pos.size();
+  if (st.particles == 0) {
+    st.ms_total = msSince(t_start);
+    return res;
+  }
+  const double r_eff = w.rEff();
+  st.r_eff = r_eff;
+
+  t = Clock::now();
+  w.moveParticles(st, r_eff);
+  st.ms_sensors = msSince(t);
+
+  t = Clock::now();
+  w.flagBySensors(r_eff, st);
+  if (w.settings.flagging == Flagging::SensorsAndBounds) w.flagByBounds();
+  std::sort(res.flagged.begin(), res.flagged.end(), flaggedLess);
+  std::size_t keep = 0;
+  for (std::size_t i = 0; i < res.flagged.size(); ++i) {
+    if (keep > 0 && !flaggedLess(res.flagged[keep - 1], res.flagged[i])) {
+      res.flagged[keep - 1].by_sensors |= res.flagged[i].by_sensors;
+      res.flagged[keep - 1].by_bounds |= res.flagged[i].by_bounds;
+    } else {
+      res.flagged[keep++] = res.flagged[i];
+    }
+  }
+  res.flagged.resize(keep);
+  st.flagged_pairs = keep;
+  for (const FlaggedPair& f : res.flagged) {
+    if (f.by_sensors) ++st.flagged_by_sensors;
+    else ++st.flagged_by_bounds_only;
+  }
+  st.ms_flagging = msSince(t);
+
+  if (w.settings.build_candidates) {
+    t = Clock::now();
+    w.buildCandidates(st);
+    st.ms_candidates = msSince(t);
+  }
+  st.ms_total = msSince(t_start);
+  return res;
+}
+
+const StepResult& SensorWorld::lastResult() const { return impl_->result; }
+
+CandidateSet SensorWorld::candidateSet(const FlaggedPair& pair, BodyId vertex_body) const {
+  if (vertex_body != pair.body_a && vertex_body != pair.body_b)
+    throw Error(ErrorCode::InvalidArgument, "candidateSet: body " + std::to_string(vertex_body) +
+                                                " is not one of the flagged pair's bodies");
+  const bool a_side = vertex_body == pair.body_a;
+  const Body& vb = impl_->get(vertex_body);
+  const Body& tb = impl_->get(a_side ? pair.body_b : pair.body_a);
+  CandidateSet out;
+  out.vertex_body = vb.id;
+  out.triangle_body = tb.id;
+  detail::regionVertexSet(vb, a_side ? pair.region_a : pair.region_b, impl_->settings.one_ring, out.vertices);
+  detail::regionTriangleSet(tb, a_side ? pair.region_b : pair.region_a, impl_->settings.one_ring, out.triangles);
+  return out;
+}
+
+double SensorWorld::mu(BodyId a, BodyId b) const {
+  const Body& ba = impl_->get(a);
+  const Body& bb = impl_->get(b);
+  return impl_->settings.mu_edge_factor * std::max(ba.mean_edge, bb.mean_edge) + ba.margin + bb.margin;
+}
+
+const MeshTopology& SensorWorld::topology(BodyId id) const { return *impl_->get(id).topology; }
+
+const Partition& SensorWorld::partition(BodyId id) const {
+  const Body& b = impl_->get(id);
+  if (!b.partitioned) throw Error(ErrorCode::InvalidArgument, b.label() + " has not been partitioned yet (call step())");
+  return b.partition;
+}
+
+std::vector<ParticleState> SensorWorld::particles() const {
+  std::vector<ParticleState> out;
+  for (const auto& kv : impl_->bodies)
+    for (Index r = 0; r < kv.second->regionCount(); ++r) out.push_back({kv.first, r, kv.second->particle_vertex[r]});
+  return out;
+}
+
+std::size_t SensorWorld::particleCount(BodyId id) const { return impl_->get(id).regionCount(); }
+std::size_t SensorWorld::repartitionCount(BodyId id) const { return impl_->get(id).repartitions; }
+
+std::size_t SensorWorld::memoryBytes(BodyId id) const {
+  const Body& b = impl_->get(id);
+  return sizeof(Body) + b.topology->bytes() + b.regions.bytes() + b.partition.region_of.capacity() * sizeof(Index) +
+         b.partition.seed_vertex.capacity() * sizeof(Index) +
+         b.partition.code_vectors.capacity() * sizeof(b.partition.code_vectors[0]) +
+         b.particle_vertex.capacity() * sizeof(Index) + (b.rho.capacity() + b.motion.capacity()) * sizeof(double);
+}
+
+const MeshReport& SensorWorld::report(BodyId id) const { return impl_->get(id).report; }
+const SensorSettings& SensorWorld::settings() const { return impl_->settings; }
+
+}  // namespace psc

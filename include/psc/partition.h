@@ -34,13 +34,31 @@ struct Partition {
   bool hit_iteration_cap = false;
   std::size_t islands_reassigned = 0;  ///< vertex islands moved by connectivity repair
   std::size_t empty_reseeded = 0;      ///< empty clusters reseeded
+  /// Splits after which the first nearest-code-vector assignment left one of the two children
+  /// empty: the split rule did not separate the cluster (SplitRule::Thesis on a cluster whose mean
+  /// is the origin, thesis §5.1.2; or a cluster of identical features). The empty child is then
+  /// reseeded like any empty cluster, so the count is still reached; this counter is the evidence.
+  std::size_t failed_splits = 0;
+  /// Regions that are not one connected piece over the one-ring adjacency at the end. 0 whenever
+  /// connect_regions is on and count ≥ the number of mesh pieces (components with triangles).
+  std::size_t disconnected_regions = 0;
   std::size_t regionCount() const { return seed_vertex.size(); }
 };
 
 /// Partitions the mesh into exactly `count` regions (1 ≤ count ≤ vertices in triangles); with
 /// `any_count` off, count must be a power of two. Throws psc::Error(InvalidSettings) naming the
-/// setting when out of range. Isolated vertices (in no triangle) join the region of their nearest
-/// code vector but are never reachable by hops. Deterministic: same input, same bits.
+/// setting when out of range, psc::Error(InvalidMesh) for a view of the wrong size or a non-finite
+/// coordinate. Isolated vertices (in no triangle) join the region of their nearest code vector but
+/// are never reachable by hops. Deterministic: same input, same bits.
+///
+/// Every region is non-empty. With connect_regions on, every region is one connected piece when
+/// count ≥ P, P the number of mesh pieces (connected components that have triangles): a piece
+/// LBG left without a region takes the label of the smallest region of the piece holding the most
+/// regions, which is merged into its neighbour. When count < P connected regions are impossible;
+/// then no exception: each region is connected inside every piece it touches and takes whole
+/// pieces (the particle reaches only the piece it starts on); disconnected_regions reports it.
+/// code_vectors and seed_vertex describe the final (repaired) regions: each code vector is the
+/// mean feature of its region.
 Partition partitionLBG(const MeshTopology& topology, const PositionView& positions, std::size_t count,
                        const PartitionSettings& settings = {});
 

@@ -2,10 +2,12 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>  // cross(), AngleAxis
 
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 namespace psc {
@@ -36,6 +38,8 @@ struct IndexRows {
   std::size_t rows() const { return offsets.size() - 1; }
   IndexRange row(std::size_t r) const { return {items.data() + offsets[r], items.data() + offsets[r + 1]}; }
   std::size_t bytes() const { return (offsets.capacity() + items.capacity()) * sizeof(Index); }
+  /// Rows from (row, item) pairs; each row's items come out sorted and unique. Sorts `pairs`.
+  static IndexRows fromPairs(std::size_t rows, std::vector<std::pair<Index, Index>>& pairs);
 };
 
 }  // namespace psc

@@ -1,0 +1,64 @@
+// Private: one body of a SensorWorld, its regions and its particles.
+#pragma once
+
+#include "psc/budget.h"
+#include "psc/mesh.h"
+#include "psc/partition.h"
+#include "psc/types.h"
+#include "psc/world.h"
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace psc::detail {
+
+/// Per-region index lists derived from a partition (the thesis's regions plus the one-vertex ring
+/// that §3.5's exact check extends them by).
+struct RegionLists {
+  IndexRows vertices;        ///< vertices of each region, ascending
+  IndexRows ring;            ///< vertices adjacent to the region but outside it, ascending
+  IndexRows triangles;       ///< triangles with at least one vertex in the region, ascending
+  IndexRows ring_triangles;  ///< triangles touching the ring but not the region, ascending
+  std::size_t bytes() const { return vertices.bytes() + ring.bytes() + triangles.bytes() + ring_triangles.bytes(); }
+};
+
+RegionLists buildRegionLists(const MeshTopology& topology, const std::vector<Index>& region_of, std::size_t regions);
+
+struct Body {
+  BodyId id = kInvalidBody;
+  std::string name;
+  std::optional<MeshTopology> topology;
+  PositionView positions;
+  PositionView previous;
+  double margin = 0.0;
+  std::size_t particle_override = 0;
+  bool deformable = true;
+  std::shared_ptr<const ConvexParts> parts;
+  MeshReport report;
+  std::size_t vertices_in_triangles = 0;
+
+  // Partition state; valid when `partitioned`.
+  bool partitioned = false;
+  std::size_t budget = 0;
+  Partition partition;
+  RegionLists regions;
+  std::vector<Index> particle_vertex;  ///< one per region
+  double mean_edge = 0.0;              ///< at (re)partitioning: μ's geometric base
+  double max_edge = 0.0;               ///< at (re)partitioning: the stretch trigger's base
+  double area_star = 0.0;              ///< A*: largest region area at (re)partitioning
+  double diameter = 0.0;               ///< bounding diameter at (re)partitioning
+  std::size_t repartitions = 0;
+  int steps_since_check = 0;
+
+  // Per-step scratch, one entry per region.
+  std::vector<double> rho;     ///< max distance of region ∪ ring vertices from the particle
+  std::vector<double> motion;  ///< max |x − x_prev| over the region's vertices
+
+  std::string label() const { return name.empty() ? "body #" + std::to_string(id) : "body '" + name + "'"; }
+  std::size_t regionCount() const { return particle_vertex.size(); }
+  double vertexMotion(Index v) const { return previous.empty() ? 0.0 : (positions[v] - previous[v]).norm(); }
+};
+
+}  // namespace psc::detail

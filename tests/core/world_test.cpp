@@ -1,0 +1,368 @@
+// The SensorWorld against brute force: the thesis's chapter-4 cases placed by hand, candidate
+// sets, determinism, repartitioning and bad input.
+#include "reference.h"
+
+#include "psc/error.h"
+#include "psc/repartition.h"
+#include "psc/shapes.h"
+#include "psc/world.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <iostream>
+#include <limits>
+#include <set>
+
+namespace psc {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+struct Scene {
+  std::vector<TriMesh> meshes;
+  std::vector<BodyId> ids;
+  SensorWorld world;
+  explicit Scene(const SensorSettings& s = {}) : world(s) {}
+  // Views point into `meshes`, so add all meshes first, then register.
+  void registerAll(double margin) {
+    for (std::size_t i = 0; i < meshes.size(); ++i) {
+      BodyDesc d;
+      d.triangles = meshes[i].triangles;
+      d.positions = PositionView::of(meshes[i].vertices);
+      d.margin = margin;
+      d.name = "mesh" + std::to_string(i);
+      ids.push_back(world.addBody(d));
+    }
+  }
+};
+
+double meanEdge(const TriMesh& m) {
+  MeshTopology t(m.triangles, m.vertices.size());
+  return edgeStats(t, PositionView::of(m.vertices)).mean;
+}
+
+struct CoverageReport {
+  std::size_t truth = 0;          // true contacts (vertex-triangle distance < radius)
+  std::size_t in_sets = 0;        // ... lying in some flagged pair's candidate sets
+  std::size_t in_pairs = 0;       // ... appearing among the step's candidate pairs
+  std::size_t sensor_sets = 0;    // ... lying in the sets of a pair flagged by the sensors alone
+};
+
+// For every ordered pair of bodies: brute-force contacts within `radius`, and where they are found.
+CoverageReport coverage(Scene& sc, const StepResult& res, double radius) {
+  CoverageReport rep;
+  std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
+  for (const CandidatePair& c : res.candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+  // Expand each flagged pair's sets once.
+  struct Sets {
+    BodyId vb, tb;
+    std::set<Index> v, t;
+    bool sensors;
+  };
+  std::vector<Sets> sets;
+  for (const FlaggedPair& f : res.flagged)
+    for (BodyId vb : {f.body_a, f.body_b}) {
+      const CandidateSet cs = sc.world.candidateSet(f, vb);
+      sets.push_back({cs.vertex_body, cs.triangle_body, {cs.vertices.begin(), cs.vertices.end()},
+                      {cs.triangles.begin(), cs.triangles.end()}, f.by_sensors});
+    }
+  for (std::size_t i = 0; i < sc.meshes.size(); ++i)
+    for (std::size_t j = 0; j < sc.meshes.size(); ++j) {
+      if (i == j) continue;
+      for (const auto& [v, t] : test::bruteContacts(sc.meshes[i], sc.meshes[j], radius)) {
+        ++rep.truth;
+        bool in = false, by_sensor = false;
+        for (const Sets& s : sets)
+          if (s.vb == sc.ids[i] && s.tb == sc.ids[j] && s.v.count(v) && s.t.count(t)) {
+            in = true;
+            by_sensor = by_sensor || s.sensors;
+          }
+        rep.in_sets += in;
+        rep.sensor_sets += by_sensor;
+        rep.in_pairs += cand.count({sc.ids[i], v, sc.ids[j], t});
+      }
+    }
+  return rep;
+}
+
+// Runs a few steps (the particles need rounds to settle) and checks coverage of the last step.
+void expectFullCoverage(Scene& sc, double margin, const char* what) {
+  sc.registerAll(margin);
+  const StepResult* res = nullptr;
+  for (int s = 0; s < 3; ++s) res = &sc.world.step();
+  const double mu = sc.world.mu(sc.ids[0], sc.ids[1]);
+  const CoverageReport atMu = coverage(sc, *res, mu);
+  const CoverageReport atMargin = coverage(sc, *res, 2.0 * margin);
+  std::cout << "[ chapter 4 ] " << what << ": " << atMu.truth << " contacts within mu=" << mu << ", "
+            << atMu.in_sets << " in flagged sets (" << atMu.sensor_sets << " via sensor flags alone); "
+            << atMargin.truth << " within the margins, " << atMargin.in_pairs << " among candidate pairs; "
+            << res->stats.flagged_pairs << " flagged pairs (" << res->stats.flagged_by_sensors
+            << " by sensors), " << res->stats.particles << " particles, " << res->stats.rounds << " rounds\n";
+  EXPECT_GT(atMu.truth, 0u) << what << ": the scene must touch";
+  EXPECT_EQ(atMu.in_sets, atMu.truth) << what;
+  EXPECT_EQ(atMargin.in_pairs, atMargin.truth) << what;
+  EXPECT_GT(res->stats.flagged_by_sensors, 0u) << what << ": the sensors themselves must flag the contact";
+}
+
+TEST(Chapter4, TwoEqualSpheresTouching) {
+  Scene sc;
+  TriMesh a = makeSphere(1.0, 600), b = makeSphere(1.0, 600);
+  const double gap = 0.3 * meanEdge(a);
+  b.rotate(Vec3(0.3, 1, 0.2), 0.7).translate(Vec3(2.0 + gap, 0, 0));
+  sc.meshes = {a, b};
+  expectFullCoverage(sc, 0.4 * meanEdge(a), "two equal spheres");
+}
+
+TEST(Chapter4, ThreeEqualSpheresInARow) {
+  Scene sc;
+  TriMesh a = makeSphere(1.0, 600), b = makeSphere(1.0, 600), c = makeSphere(1.0, 600);
+  const double gap = 0.3 * meanEdge(a);
+  b.translate(Vec3(2.0 + gap, 0, 0));
+  c.translate(Vec3(4.0 + 2 * gap, 0, 0));
+  sc.meshes = {a, b, c};
+  expectFullCoverage(sc, 0.4 * meanEdge(a), "three equal spheres");
+}
+
+TEST(Chapter4, SpheresDHalfDD) {
+  Scene sc;
+  TriMesh a = makeSphere(1.0, 600), b = makeSphere(0.5, 300), c = makeSphere(1.0, 600);
+  const double gap = 0.3 * meanEdge(b);
+  b.translate(Vec3(1.5 + gap, 0, 0));
+  c.translate(Vec3(3.0 + 2 * gap, 0, 0));
+  sc.meshes = {a, b, c};
+  expectFullCoverage(sc, 0.4 * meanEdge(b), "spheres D, D/2, D");
+}
+
+TEST(Chapter4, InterlockingUShapes) {
+  Scene sc;
+  TriMesh a = makeUShape(1.0, 1.0, 0.2, 1200);
+  TriMesh b = makeUShape(1.0, 1.0, 0.2, 1200);
+  // b's bend hooks through a's opening, rotated a quarter turn so the tubes cross.
+  const double e = meanEdge(a);
+  b.rotate(Vec3(0, 1, 0), kPi / 2).rotate(Vec3(0, 0, 1), kPi).translate(Vec3(0.5, 1.0 + 0.4 + 0.3 * e, 0.0));
+  sc.meshes = {a, b};
+  expectFullCoverage(sc, 0.4 * e, "interlocking U shapes");
+}
+
+TEST(Candidates, ContainEveryNearPairOfTheFlaggedSetsWithoutAllPairsLoop) {
+  SensorSettings s;
+  Scene sc(s);
+  TriMesh a = makeSphere(1.0, 1500), b = makeTorus(0.8, 0.3, 1500);
+  b.rotate(Vec3(1, 0, 0), kPi / 2).translate(Vec3(1.95, 0.1, 0));
+  sc.meshes = {a, b};
+  const double margin = 0.5 * meanEdge(a);
+  sc.registerAll(margin);
+  const StepResult& res = sc.world.step();
+  ASSERT_GT(res.flagged.size(), 0u);
+  std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
+  for (const CandidatePair& c : res.candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+  EXPECT_EQ(cand.size(), res.candidates.size()) << "each (vertex, triangle) at most once";
+  std::size_t near = 0, all_pairs = 0;
+  for (const FlaggedPair& f : res.flagged)
+    for (BodyId vb : {f.body_a, f.body_b}) {
+      const CandidateSet cs = sc.world.candidateSet(f, vb);
+      const TriMesh& vm = sc.meshes[vb == sc.ids[0] ? 0 : 1];
+      const TriMesh& tm = sc.meshes[vb == sc.ids[0] ? 1 : 0];
+      all_pairs += cs.vertices.size() * cs.triangles.size();
+      for (Index v : cs.vertices)
+        for (Index t : cs.triangles) {
+          const Triangle& tri = tm.triangles[t];
+          if (test::pointTriangleDistance(vm.vertices[v], tm.vertices[tri[0]], tm.vertices[tri[1]],
+                                          tm.vertices[tri[2]]) < 2 * margin) {
+            ++near;
+            EXPECT_TRUE(cand.count({cs.vertex_body, v, cs.triangle_body, t})) << "vertex " << v << " triangle " << t;
+          }
+        }
+    }
+  EXPECT_GT(near, 20u);
+  // The pair grid visits far fewer (vertex, triangle) entries than the |V|·|T| product.
+  const std::size_t linear = res.stats.candidate_vertices + res.stats.candidate_triangles + res.stats.candidate_pairs;
+  std::cout << "[ candidates ] probes " << res.stats.candidate_probes << ", |V|+|T|+found " << linear
+            << ", |V|x|T| " << all_pairs << "\n";
+  EXPECT_LT(res.stats.candidate_probes, all_pairs / 10);
+  EXPECT_LT(res.stats.candidate_probes, 40 * linear);
+}
+
+TEST(World, FarApartBodiesFlagNothing) {
+  Scene sc;
+  TriMesh a = makeSphere(1.0, 300), b = makeSphere(1.0, 300);
+  b.translate(Vec3(5, 0, 0));
+  sc.meshes = {a, b};
+  sc.registerAll(0.01);
+  const StepResult& res = sc.world.step();
+  EXPECT_EQ(res.flagged.size(), 0u);
+  EXPECT_EQ(res.candidates.size(), 0u);
+  EXPECT_EQ(res.stats.particles, 2u);  // two convex bodies: one particle each (thesis §3.1)
+}
+
+TEST(World, DeterministicBitForBit) {
+  auto run = [] {
+    Scene sc;
+    TriMesh a = makeSphere(1.0, 800), b = makeTorus(0.8, 0.3, 800), c = makeSphere(0.6, 400);
+    b.translate(Vec3(1.9, 0, 0));
+    c.translate(Vec3(0, 1.55, 0.2));
+    sc.meshes = {a, b, c};
+    sc.registerAll(0.02);
+    std::vector<FlaggedPair> flagged;
+    std::vector<CandidatePair> cands;
+    std::vector<ParticleState> parts;
+    for (int s = 0; s < 8; ++s) {
+      for (Vec3& p : sc.meshes[1].vertices) p.x() -= 0.01;  // b approaches a
+      const StepResult& r = sc.world.step();
+      flagged.insert(flagged.end(), r.flagged.begin(), r.flagged.end());
+      cands.insert(cands.end(), r.candidates.begin(), r.candidates.end());
+    }
+    for (const ParticleState& p : sc.world.particles()) parts.push_back(p);
+    return std::make_tuple(flagged, cands, parts.size(), parts.empty() ? 0u : parts.back().vertex);
+  };
+  const auto r1 = run();
+  const auto r2 = run();
+  EXPECT_GT(std::get<0>(r1).size(), 0u);
+  EXPECT_TRUE(std::get<0>(r1) == std::get<0>(r2));
+  EXPECT_TRUE(std::get<1>(r1) == std::get<1>(r2));
+  EXPECT_EQ(std::get<2>(r1), std::get<2>(r2));
+  EXPECT_EQ(std::get<3>(r1), std::get<3>(r2));
+}
+
+// Runs `steps` steps with `deform` applied to body 0 before each; returns its repartition count.
+std::size_t repartitionsAfter(AreaEstimator est, const std::function<void(std::vector<Vec3>&, int)>& deform) {
+  SensorSettings s;
+  s.repartition.estimator = est;
+  s.repartition.check_every = 1;
+  s.repartition.edge_stretch_trigger = 0.0;  // isolate the area estimators
+  Scene sc(s);
+  TriMesh a = makeSphere(1.0, 1000), b = makeSphere(1.0, 1000);
+  b.translate(Vec3(3, 0, 0));
+  sc.meshes = {a, b};
+  BodyDesc d;
+  for (std::size_t i = 0; i < 2; ++i) {
+    d.triangles = sc.meshes[i].triangles;
+    d.positions = PositionView::of(sc.meshes[i].vertices);
+    d.particles = 8;  // several regions so the walk has room
+    sc.ids.push_back(sc.world.addBody(d));
+  }
+  sc.world.step();
+  const std::vector<Vec3> rest = sc.meshes[0].vertices;
+  for (int step = 1; step <= 10; ++step) {
+    sc.meshes[0].vertices = rest;
+    deform(sc.meshes[0].vertices, step);
+    sc.world.step();
+  }
+  return sc.world.repartitionCount(sc.ids[0]);
+}
+
+TEST(Repartition, StretchTriggersRigidMotionDoesNot) {
+  for (AreaEstimator est : {AreaEstimator::TrueArea, AreaEstimator::FourDirectionWalk}) {
+    const char* name = est == AreaEstimator::TrueArea ? "true area" : "four-direction walk";
+    const std::size_t rigid = repartitionsAfter(est, [](std::vector<Vec3>& p, int step) {
+      const Eigen::AngleAxisd rot(0.15 * step, Vec3(0.2, 1.0, 0.4).normalized());
+      for (Vec3& x : p) x = rot * x + Vec3(0.05 * step, -0.02 * step, 0.0);
+    });
+    EXPECT_EQ(rigid, 0u) << name;
+    const std::size_t stretched = repartitionsAfter(est, [](std::vector<Vec3>& p, int step) {
+      const double f = 1.0 + 0.25 * step;  // reaches 3.5× along x and 1.75× along y
+      for (Vec3& x : p) x = Vec3(x.x() * f, x.y() * (1.0 + 0.075 * step), x.z());
+    });
+    EXPECT_GE(stretched, 1u) << name;
+  }
+}
+
+TEST(Repartition, EdgeStretchTriggersAndRefreshesMu) {
+  SensorSettings s;
+  s.repartition.check_every = 1;
+  s.repartition.area_trigger = 1e9;  // only the edge trigger can fire
+  Scene sc(s);
+  TriMesh a = makeSphere(1.0, 500), b = makeSphere(1.0, 500);
+  b.translate(Vec3(3, 0, 0));
+  sc.meshes = {a, b};
+  sc.registerAll(0.0);
+  sc.world.step();
+  const double mu0 = sc.world.mu(sc.ids[0], sc.ids[1]);
+  for (Vec3& x : sc.meshes[0].vertices) x *= 2.0;
+  sc.world.step();
+  EXPECT_EQ(sc.world.repartitionCount(sc.ids[0]), 1u);
+  EXPECT_EQ(sc.world.repartitionCount(sc.ids[1]), 0u) << "only the body that needs it";
+  EXPECT_NEAR(sc.world.mu(sc.ids[0], sc.ids[1]), 2.0 * mu0, 1e-9);
+}
+
+TEST(Repartition, WalkEstimatorMatchesRectangleOnPatch) {
+  // A flat grid patch in one region: the walk spans the whole patch, so the estimate is the
+  // patch's area (up to the grid spacing).
+  const TriMesh p = makePatch(2.0, 1.0, 21, 11);
+  MeshTopology topo(p.triangles, p.vertices.size());
+  Partition part;
+  part.region_of.assign(p.vertices.size(), 0);
+  part.seed_vertex = {static_cast<Index>(5 * 21 + 10)};  // the centre vertex
+  EXPECT_NEAR(regionAreaWalk(topo, PositionView::of(p.vertices), part, part.seed_vertex[0]), 2.0, 1e-9);
+  EXPECT_NEAR(regionAreasTrue(topo, PositionView::of(p.vertices), part)[0], 2.0, 1e-9);
+}
+
+std::string messageOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+TEST(WorldErrors, BadBodiesAreNamed) {
+  SensorWorld w;
+  TriMesh m = makeSphere(1.0, 100);
+  BodyDesc d;
+  d.triangles = m.triangles;
+  d.positions = PositionView::of(m.vertices);
+  d.name = "ball";
+  d.margin = -1.0;
+  EXPECT_NE(messageOf([&] { w.addBody(d); }).find("margin"), std::string::npos);
+  d.margin = 0.0;
+  d.particles = 100000;
+  EXPECT_NE(messageOf([&] { w.addBody(d); }).find("particles"), std::string::npos);
+  d.particles = 0;
+  d.triangles.push_back({0, 1, 100000});
+  const std::string idx = messageOf([&] { w.addBody(d); });
+  EXPECT_NE(idx.find("ball"), std::string::npos) << idx;
+  EXPECT_NE(idx.find("out of range"), std::string::npos) << idx;
+  d.triangles = m.triangles;
+  std::vector<Vec3> flat(m.vertices.size(), Vec3(1, 2, 3));
+  d.positions = PositionView::of(flat);
+  EXPECT_NE(messageOf([&] { w.addBody(d); }).find("degenerate"), std::string::npos);
+  EXPECT_NE(messageOf([&] { w.removeBody(42); }).find("unknown body"), std::string::npos);
+  EXPECT_EQ(w.bodyIds().size(), 0u) << "nothing half-added";
+}
+
+TEST(WorldErrors, SettingsOutOfRangeAreNamed) {
+  SensorSettings s;
+  s.mu_edge_factor = 0.2;
+  EXPECT_NE(messageOf([&] { SensorWorld w(s); }).find("mu_edge_factor"), std::string::npos);
+  s = {};
+  s.r_eff = -1;
+  EXPECT_NE(messageOf([&] { SensorWorld w(s); }).find("r_eff"), std::string::npos);
+  s = {};
+  s.max_rounds = 0;
+  EXPECT_NE(messageOf([&] { SensorWorld w(s); }).find("max_rounds"), std::string::npos);
+  s = {};
+  s.repartition.area_trigger = 0.5;
+  EXPECT_NE(messageOf([&] { SensorWorld w(s); }).find("area_trigger"), std::string::npos);
+  s = {};
+  s.partition.normal_weight = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_NE(messageOf([&] { SensorWorld w(s); }).find("normal_weight"), std::string::npos);
+}
+
+TEST(WorldErrors, PositionsTurningNaNDuringSimulationAreReported) {
+  Scene sc;
+  TriMesh a = makeSphere(1.0, 200), b = makeSphere(1.0, 200);
+  b.translate(Vec3(2.05, 0, 0));
+  sc.meshes = {a, b};
+  sc.registerAll(0.01);
+  sc.world.step();
+  sc.meshes[1].vertices[7].x() = std::numeric_limits<double>::quiet_NaN();
+  const std::string msg = messageOf([&] { sc.world.step(); });
+  EXPECT_NE(msg.find("mesh1"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("vertex 7"), std::string::npos) << msg;
+}
+
+}  // namespace
+}  // namespace psc
