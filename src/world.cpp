@@ -51,6 +51,7 @@ struct SensorWorld::Impl {
   std::vector<Index> p_region;
   std::vector<Vec3> p_pos;
   std::vector<Index> p_dest;
+  std::vector<Index> p_left;  // vertex each particle left last round (no_backtrack)
   std::vector<double> p_motion;
   std::vector<Index> near;
   PointHashGrid grid;
@@ -67,13 +68,21 @@ struct SensorWorld::Impl {
 
   double rEff() const {
     double r = settings.r_eff;
-    double max_diameter = 0.0, max_edge = 0.0, max_margin = 0.0;
+    double d1 = 0.0, d2 = 0.0, max_edge = 0.0, max_margin = 0.0;  // two largest diameters
     for (const auto& kv : bodies) {
-      max_diameter = std::max(max_diameter, kv.second->diameter);
+      const double d = kv.second->diameter;
+      if (d > d1) {
+        d2 = d1;
+        d1 = d;
+      } else {
+        d2 = std::max(d2, d);
+      }
       max_edge = std::max(max_edge, kv.second->mean_edge);
       max_margin = std::max(max_margin, kv.second->margin);
     }
-    if (r == 0.0) r = max_diameter;
+    // Any two surface points of two touching bodies are closer than the sum of their diameters,
+    // so with this R_eff the particles of touching bodies always feel each other.
+    if (r == 0.0) r = d1 + d2;
     // §5.1.3: a touching pair is only pulled together when R_eff exceeds μ.
     const double max_mu = settings.mu_edge_factor * max_edge + 2.0 * max_margin;
     return std::max(r, 1.01 * max_mu + 1e-12);
@@ -164,6 +173,7 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
   const double floor2 = 1e-12 * r_eff2;  // Φ stays finite when two particles coincide
 
   p_dest.resize(n);
+  p_left.assign(n, kInvalidIndex);
   for (int round = 0; round < settings.max_rounds; ++round) {
     grid.build(p_pos, reach);
     std::size_t moved = 0;
@@ -189,7 +199,7 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
       // Neighbours are sorted ascending and only a strictly larger pull moves the particle:
       // ties stay, then lowest index, so runs are deterministic.
       for (Index u : b.topology->neighbors(cur)) {
-        if (b.partition.region_of[u] != region) continue;
+        if (b.partition.region_of[u] != region || u == p_left[i]) continue;
         const double f = phi(b.positions[u]);
         if (f > best) {
           best = f;
@@ -203,7 +213,12 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
     stats.particle_moves += moved;
     // Jacobi: every destination was chosen from the same positions; now all move at once.
     for (std::size_t i = 0; i < n; ++i) {
-      p_body[i]->particle_vertex[p_region[i]] = p_dest[i];
+      Index& at = p_body[i]->particle_vertex[p_region[i]];
+      // Two particles approaching head-on along parallel paths pass each other and, under pure
+      // Jacobi updates, swap back forever (seen on interlocking U shapes): with no_backtrack a
+      // particle never returns to the vertex it just left within one step.
+      if (settings.no_backtrack && p_dest[i] != at) p_left[i] = at;
+      at = p_dest[i];
       p_pos[i] = p_body[i]->positions[p_dest[i]];
     }
   }
@@ -494,7 +509,7 @@ const StepResult& SensorWorld::step() {
       w.p_body.push_back(&b);
       w.p_region.push_back(r);
       const Vec3 p = b.positions[b.particle_vertex[r]];
-      if (!p.allFinite()) checkFinite(b.positions, b.label());
+      if (!p.allFinite() || p.cwiseAbs().maxCoeff() > kMaxCoordinate) checkFinite(b.positions, b.label());
       w.p_pos.push_back(p);
     }
   }

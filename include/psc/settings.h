@@ -31,11 +31,16 @@ struct SensorSettings {
   /// μ_geom = mu_edge_factor × the larger mean edge length of the two bodies (length units).
   /// Thesis §5.1.4 proves μ must be at least half the mean edge: factor ≥ 0.5.
   double mu_edge_factor = 1.0;
-  /// Effective radius of the pull, length units. 0 = auto: the largest body's bounding diameter
-  /// (so touching bodies always see each other). Always clamped above the largest μ.
+  /// Effective radius of the pull, length units. 0 = auto: the sum of the two largest bounding
+  /// diameters (any two points of two touching bodies are closer than that, so their particles
+  /// always feel each other; the thesis uses the largest distance between initial particles).
+  /// Always clamped above the largest μ.
   double r_eff = 0.0;
   /// Movement rounds per step before giving up (≥ 1); a hit is counted in StepStats.
   int max_rounds = 64;
+  /// [beyond] Within one step a particle never hops back to the vertex it just left. Pure Jacobi
+  /// updates (thesis §3.4) let two particles approaching head-on swap places forever; off = thesis.
+  bool no_backtrack = true;
   Flagging flagging = Flagging::SensorsAndBounds;
   /// Candidate sets extend by one vertex ring around the flagged regions (thesis §3.5).
   bool one_ring = true;
