@@ -26,6 +26,31 @@ struct RegionLists {
 
 RegionLists buildRegionLists(const MeshTopology& topology, const std::vector<Index>& region_of, std::size_t regions);
 
+/// [beyond] The bounds layer under the regions: each region cut into compact chunks of at most
+/// `chunk_vertices` vertices (median splits along the longest axis). Every triangle belongs to
+/// exactly one chunk (that of its lowest vertex index), so each (vertex, triangle) pair belongs
+/// to exactly one (chunk, chunk) pair and candidate pairs come out unique without sorting.
+struct ChunkLists {
+  IndexRows vertices;         ///< own vertices of each chunk
+  IndexRows triangles;        ///< triangles owned by each chunk
+  IndexRows box_vertices;     ///< own vertices ∪ vertices of owned triangles: what the box covers
+  std::vector<Index> region_begin;  ///< chunks of region r are [region_begin[r], region_begin[r+1])
+  std::size_t count() const { return vertices.rows(); }
+  std::size_t bytes() const {
+    return vertices.bytes() + triangles.bytes() + box_vertices.bytes() + region_begin.capacity() * sizeof(Index);
+  }
+};
+
+ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positions, const RegionLists& regions,
+                       std::size_t chunk_vertices);
+
+/// Axis-aligned box with the largest vertex motion inside it.
+struct MotionBox {
+  Vec3 lo = Vec3::Zero();
+  Vec3 hi = Vec3::Zero();
+  double motion = 0.0;
+};
+
 struct Body {
   BodyId id = kInvalidBody;
   std::string name;
@@ -52,9 +77,11 @@ struct Body {
   std::size_t repartitions = 0;
   int steps_since_check = 0;
 
-  // Per-step scratch, one entry per region.
-  std::vector<double> rho;     ///< max distance of region ∪ ring vertices from the particle
-  std::vector<double> motion;  ///< max |x − x_prev| over the region's vertices
+  // Bounds layer (Flagging::SensorsAndBounds), refit every step.
+  ChunkLists chunks;
+  std::vector<MotionBox> chunk_box;
+  std::vector<MotionBox> region_box;
+  MotionBox body_box;
 
   std::string label() const { return name.empty() ? "body #" + std::to_string(id) : "body '" + name + "'"; }
   std::size_t regionCount() const { return particle_vertex.size(); }

@@ -65,19 +65,20 @@ void collectCandidates(const Body& vb, const std::vector<Index>& vertices, const
   // when larger) and grows until the grid has at most ~2 cells per triangle, so its size stays
   // O(|T|) whatever the shape of the set.
   double h = std::max({tb.mean_edge, margin_sum, 1e-9 * (hi - lo).norm(), 1e-30});
+  // Counted in double: a thin set with a tiny cell has per-axis counts whose product overflows.
   std::array<long long, 3> dim{};
   for (;;) {
-    long long cells = 1;
-    for (int a = 0; a < 3; ++a) {
-      dim[static_cast<std::size_t>(a)] = static_cast<long long>(std::floor((hi[a] - lo[a]) / h)) + 1;
-      cells *= dim[static_cast<std::size_t>(a)];
-    }
-    if (cells <= static_cast<long long>(2 * nt + 64)) break;
+    double cells = 1.0;
+    for (int a = 0; a < 3; ++a) cells *= std::floor((hi[a] - lo[a]) / h) + 1.0;
+    if (cells <= static_cast<double>(2 * nt + 64)) break;
     h *= 1.5;
   }
+  for (int a = 0; a < 3; ++a)
+    dim[static_cast<std::size_t>(a)] = static_cast<long long>(std::floor((hi[a] - lo[a]) / h)) + 1;
+  // Clamped before the conversion: a query box grown by a large motion term lies far outside.
   const auto cellCoord = [&](double x, int a) {
-    const long long c = static_cast<long long>(std::floor((x - lo[a]) / h));
-    return static_cast<int>(std::clamp(c, 0LL, dim[static_cast<std::size_t>(a)] - 1));
+    const double c = std::floor((x - lo[a]) / h);
+    return static_cast<int>(std::clamp(c, 0.0, static_cast<double>(dim[static_cast<std::size_t>(a)] - 1)));
   };
   const auto cellIndex = [&](int x, int y, int z) {
     return static_cast<std::size_t>((static_cast<long long>(z) * dim[1] + y) * dim[0] + x);

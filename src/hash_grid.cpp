@@ -8,8 +8,16 @@
 namespace psc {
 
 std::array<std::int64_t, 3> PointHashGrid::cellOf(const Vec3& p) const {
-  return {static_cast<std::int64_t>(std::floor(p.x() / cell_)), static_cast<std::int64_t>(std::floor(p.y() / cell_)),
-          static_cast<std::int64_t>(std::floor(p.z() / cell_))};
+  // A far point with a small cell gives a cell index beyond int64 (UB to convert), and
+  // forEachCandidate adds ±1 to it. Clamping is 1-Lipschitz, so points within one cell of each
+  // other stay in neighbouring cells: far points only share more cells, which costs candidates.
+  // A NaN query lands in cell 0; its distance tests then fail, so it finds nothing.
+  constexpr double kLimit = 4.0e18;
+  const auto cell = [&](double x) {
+    const double c = std::floor(x / cell_);
+    return static_cast<std::int64_t>(std::isnan(c) ? 0.0 : std::clamp(c, -kLimit, kLimit));
+  };
+  return {cell(p.x()), cell(p.y()), cell(p.z())};
 }
 
 std::uint64_t PointHashGrid::keyOf(std::int64_t x, std::int64_t y, std::int64_t z) {

@@ -109,6 +109,12 @@ void checkFinite(const PositionView& positions, const std::string& what) {
         << ")";
       throw Error(ErrorCode::InvalidMesh, s.str());
     }
+    if (p.cwiseAbs().maxCoeff() > kMaxCoordinate) {
+      std::ostringstream s;
+      s << what << ": vertex " << i << " has a coordinate beyond +-" << kMaxCoordinate << " (" << p.x() << ", "
+        << p.y() << ", " << p.z() << ")";
+      throw Error(ErrorCode::InvalidMesh, s.str());
+    }
   }
 }
 

@@ -1,5 +1,7 @@
 #include "body.h"
 
+#include <algorithm>
+
 namespace psc::detail {
 
 RegionLists buildRegionLists(const MeshTopology& topology, const std::vector<Index>& region_of, std::size_t regions) {
@@ -29,6 +31,78 @@ RegionLists buildRegionLists(const MeshTopology& topology, const std::vector<Ind
         if (region_of[tri[0]] != r && region_of[tri[1]] != r && region_of[tri[2]] != r) pairs.emplace_back(r, t);
       }
   out.ring_triangles = IndexRows::fromPairs(regions, pairs);
+  return out;
+}
+
+}  // namespace psc::detail
+
+namespace psc::detail {
+
+namespace {
+
+// Median split along the longest axis of the box until at most `limit` vertices remain.
+void splitChunks(std::vector<Index>& ids, std::size_t begin, std::size_t end, std::size_t limit,
+                 const PositionView& positions, std::vector<std::pair<std::size_t, std::size_t>>& out) {
+  if (end - begin <= limit) {
+    out.emplace_back(begin, end);
+    return;
+  }
+  Vec3 lo = positions[ids[begin]], hi = lo;
+  for (std::size_t k = begin + 1; k < end; ++k) {
+    const Vec3 p = positions[ids[k]];
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  Eigen::Index axis = 0;
+  (hi - lo).maxCoeff(&axis);
+  const std::size_t mid = begin + (end - begin) / 2;
+  // A strict total order (coordinate, then index) makes the split independent of the library.
+  std::nth_element(ids.begin() + static_cast<std::ptrdiff_t>(begin), ids.begin() + static_cast<std::ptrdiff_t>(mid),
+                   ids.begin() + static_cast<std::ptrdiff_t>(end), [&](Index a, Index b) {
+                     const double pa = positions[a][axis], pb = positions[b][axis];
+                     return pa != pb ? pa < pb : a < b;
+                   });
+  splitChunks(ids, begin, mid, limit, positions, out);
+  splitChunks(ids, mid, end, limit, positions, out);
+}
+
+}  // namespace
+
+ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positions, const RegionLists& regions,
+                       std::size_t chunk_vertices) {
+  ChunkLists out;
+  std::vector<Index> chunk_of(topology.vertexCount(), kInvalidIndex);
+  std::vector<std::pair<Index, Index>> vpairs, tpairs, bpairs;
+  std::vector<Index> ids;
+  std::vector<std::pair<std::size_t, std::size_t>> ranges;
+  Index chunk = 0;
+  out.region_begin.push_back(0);
+  for (std::size_t r = 0; r < regions.vertices.rows(); ++r) {
+    const IndexRange row = regions.vertices.row(r);
+    ids.assign(row.begin(), row.end());
+    ranges.clear();
+    if (!ids.empty()) splitChunks(ids, 0, ids.size(), chunk_vertices, positions, ranges);
+    for (const auto& range : ranges) {
+      std::sort(ids.begin() + static_cast<std::ptrdiff_t>(range.first),
+                ids.begin() + static_cast<std::ptrdiff_t>(range.second));
+      for (std::size_t k = range.first; k < range.second; ++k) {
+        chunk_of[ids[k]] = chunk;
+        vpairs.emplace_back(chunk, ids[k]);
+        bpairs.emplace_back(chunk, ids[k]);
+      }
+      ++chunk;
+    }
+    out.region_begin.push_back(chunk);
+  }
+  for (Index t = 0; t < topology.triangleCount(); ++t) {
+    const Triangle& tri = topology.triangle(t);
+    const Index owner = chunk_of[*std::min_element(tri.begin(), tri.end())];
+    tpairs.emplace_back(owner, t);
+    for (Index v : tri) bpairs.emplace_back(owner, v);
+  }
+  out.vertices = IndexRows::fromPairs(chunk, vpairs);
+  out.triangles = IndexRows::fromPairs(chunk, tpairs);
+  out.box_vertices = IndexRows::fromPairs(chunk, bpairs);
   return out;
 }
 

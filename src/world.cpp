@@ -1,6 +1,7 @@
 #include "psc/world.h"
 
 #include "body.h"
+#include "bounds.h"
 #include "candidates.h"
 #include "psc/error.h"
 #include "psc/hash_grid.h"
@@ -93,7 +94,6 @@ struct SensorWorld::Impl {
   void checkRepartition(Body& b, StepStats& stats);
   void moveParticles(StepStats& stats, double r_eff);
   void flagBySensors(double r_eff, StepStats& stats);
-  void flagByBounds();
   void buildCandidates(StepStats& stats);
 };
 
@@ -109,11 +109,11 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
       regionAreas(*b.topology, b.positions, b.partition, b.particle_vertex, settings.repartition.estimator);
   b.area_star = areas.empty() ? 0.0 : *std::max_element(areas.begin(), areas.end());
   b.diameter = 2.0 * bounds(b.positions).radius;
-  b.rho.assign(b.regionCount(), 0.0);
-  b.motion.assign(b.regionCount(), 0.0);
+  b.chunks = detail::buildChunks(*b.topology, b.positions, b.regions, settings.chunk_vertices);
   b.budget = count;
   b.partitioned = true;
-  b.steps_since_check = 0;
+  // Bodies are checked on staggered steps so the O(M) checks do not all land on one step.
+  b.steps_since_check = static_cast<int>(b.id % static_cast<BodyId>(settings.repartition.check_every));
   if (again) ++b.repartitions;
 }
 
@@ -260,81 +260,6 @@ void SensorWorld::Impl::flagBySensors(double r_eff, StepStats& stats) {
         result.flagged.push_back(f);
       }
     });
-  }
-}
-
-void SensorWorld::Impl::flagByBounds() {
-  struct Sphere {
-    Body* body;
-    Index region;
-    Vec3 center;
-    double rho, motion, lo, hi;
-  };
-  std::vector<Sphere> spheres;
-  spheres.reserve(p_pos.size());
-  for (auto& kv : bodies) {
-    Body& b = *kv.second;
-    for (Index r = 0; r < b.regionCount(); ++r) {
-      const Vec3 c = b.positions[b.particle_vertex[r]];
-      double rho2 = 0.0, motion = 0.0;
-      bool finite = true;  // std::max swallows NaN, so non-finite input is tracked on the side
-      for (Index v : b.regions.vertices.row(r)) {
-        const Vec3 x = b.positions[v];
-        const double d2 = (x - c).squaredNorm();
-        finite = finite && std::isfinite(d2);
-        rho2 = std::max(rho2, d2);
-        if (!b.previous.empty()) motion = std::max(motion, (x - b.previous[v]).norm());
-      }
-      for (Index v : b.regions.ring.row(r)) {
-        const double d2 = (b.positions[v] - c).squaredNorm();
-        finite = finite && std::isfinite(d2);
-        rho2 = std::max(rho2, d2);
-      }
-      if (!finite || !std::isfinite(motion)) {
-        checkFinite(b.positions, b.label());
-        if (!b.previous.empty()) checkFinite(b.previous, b.label() + " (previous positions)");
-      }
-      b.rho[r] = std::sqrt(rho2);
-      b.motion[r] = motion;
-      spheres.push_back({&b, r, c, b.rho[r], motion, 0.0, 0.0});
-    }
-  }
-  if (spheres.size() < 2) return;
-  // Sweep and prune along the axis where the centres spread most.
-  Vec3 mean = Vec3::Zero();
-  for (const Sphere& s : spheres) mean += s.center;
-  mean /= static_cast<double>(spheres.size());
-  Vec3 var = Vec3::Zero();
-  for (const Sphere& s : spheres) var += (s.center - mean).cwiseAbs2();
-  int axis = 0;
-  if (var[1] > var[axis]) axis = 1;
-  if (var[2] > var[axis]) axis = 2;
-  for (Sphere& s : spheres) {
-    const double reach = s.rho + s.body->margin + settings.motion_factor * s.motion;
-    s.lo = s.center[axis] - reach;
-    s.hi = s.center[axis] + reach;
-  }
-  std::stable_sort(spheres.begin(), spheres.end(), [](const Sphere& a, const Sphere& b) { return a.lo < b.lo; });
-  for (std::size_t i = 0; i < spheres.size(); ++i) {
-    const Sphere& a = spheres[i];
-    for (std::size_t j = i + 1; j < spheres.size() && spheres[j].lo <= a.hi; ++j) {
-      const Sphere& b = spheres[j];
-      if (a.body == b.body) continue;
-      // A vertex of one region within the contact radius of a triangle touching the other lies
-      // within this distance of both particles (triangles touching J have all their vertices in
-      // J ∪ ring(J), all within ρ_J), so the test misses no contact.
-      const double limit = a.rho + b.rho + a.body->margin + b.body->margin +
-                           settings.motion_factor * std::max(a.motion, b.motion);
-      if ((a.center - b.center).squaredNorm() > limit * limit) continue;
-      FlaggedPair f;
-      const bool swap = b.body->id < a.body->id;
-      f.body_a = swap ? b.body->id : a.body->id;
-      f.region_a = swap ? b.region : a.region;
-      f.body_b = swap ? a.body->id : b.body->id;
-      f.region_b = swap ? a.region : b.region;
-      f.by_bounds = true;
-      result.flagged.push_back(f);
-    }
   }
 }
 
@@ -526,8 +451,23 @@ const StepResult& SensorWorld::step() {
   st.ms_sensors = msSince(t);
 
   t = Clock::now();
+  const bool bounds = w.settings.flagging == Flagging::SensorsAndBounds;
   w.flagBySensors(r_eff, st);
-  if (w.settings.flagging == Flagging::SensorsAndBounds) w.flagByBounds();
+  detail::BoundsCounters bc;
+  if (bounds) {
+    std::vector<Body*> ordered;
+    for (auto& kv : w.bodies) {
+      detail::refitBounds(*kv.second);
+      ordered.push_back(kv.second.get());
+    }
+    // The bounds layer flags region pairs and, in the same descent, yields the candidate pairs.
+    const auto t_collect = Clock::now();
+    double max_edge = 0.0;
+    for (const Body* b : ordered) max_edge = std::max(max_edge, b->mean_edge);
+    detail::collectByBounds(ordered, w.settings.motion_factor, 0.5 * w.settings.mu_edge_factor * max_edge,
+                            res.flagged, res.candidates, bc);
+    st.ms_candidates = msSince(t_collect);
+  }
   std::sort(res.flagged.begin(), res.flagged.end(), flaggedLess);
   std::size_t keep = 0;
   for (std::size_t i = 0; i < res.flagged.size(); ++i) {
@@ -544,9 +484,15 @@ const StepResult& SensorWorld::step() {
     if (f.by_sensors) ++st.flagged_by_sensors;
     else ++st.flagged_by_bounds_only;
   }
-  st.ms_flagging = msSince(t);
+  st.ms_flagging = msSince(t) - st.ms_candidates;
 
-  if (w.settings.build_candidates) {
+  if (bounds) {
+    st.candidate_vertices = bc.vertices;
+    st.candidate_triangles = bc.triangles;
+    st.candidate_probes = bc.probes;
+    st.candidate_pairs = res.candidates.size();
+    if (!w.settings.build_candidates) res.candidates.clear();
+  } else if (w.settings.build_candidates) {
     t = Clock::now();
     w.buildCandidates(st);
     st.ms_candidates = msSince(t);
@@ -601,7 +547,8 @@ std::size_t SensorWorld::memoryBytes(BodyId id) const {
   return sizeof(Body) + b.topology->bytes() + b.regions.bytes() + b.partition.region_of.capacity() * sizeof(Index) +
          b.partition.seed_vertex.capacity() * sizeof(Index) +
          b.partition.code_vectors.capacity() * sizeof(b.partition.code_vectors[0]) +
-         b.particle_vertex.capacity() * sizeof(Index) + (b.rho.capacity() + b.motion.capacity()) * sizeof(double);
+         b.particle_vertex.capacity() * sizeof(Index) + b.chunks.bytes() +
+         (b.chunk_box.capacity() + b.region_box.capacity()) * sizeof(detail::MotionBox);
 }
 
 const MeshReport& SensorWorld::report(BodyId id) const { return impl_->get(id).report; }

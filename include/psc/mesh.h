@@ -101,12 +101,19 @@ class MeshTopology {
 };
 
 /// Checks positions against a topology. Throws psc::Error(InvalidMesh) naming the first vertex
-/// with a NaN or infinite coordinate, or a view whose size differs from the vertex count.
+/// with a NaN, infinite or out-of-range (> kMaxCoordinate) coordinate, or a view whose size
+/// differs from the vertex count.
 /// `what` prefixes the message (e.g. the body's name). Returns the legal-but-notable findings.
 MeshReport validate(const MeshTopology& topology, const PositionView& positions,
                     const std::string& what = "mesh");
 
-/// Throws psc::Error(InvalidMesh) for the first non-finite coordinate only (O(M), no topology).
+/// Largest accepted coordinate magnitude (length units). Beyond it, squared lengths and squared
+/// areas (length⁴) computed in double would overflow; no scene needs it, since a mesh of unit size
+/// at 1e16 has already collapsed to equal coordinates.
+inline constexpr double kMaxCoordinate = 1e30;
+
+/// Throws psc::Error(InvalidMesh) for the first coordinate that is NaN, infinite or larger in
+/// magnitude than kMaxCoordinate (O(M), no topology).
 void checkFinite(const PositionView& positions, const std::string& what = "mesh");
 
 /// Area-weighted vertex normals (unit length; zero for vertices in no non-degenerate triangle).

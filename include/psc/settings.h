@@ -9,8 +9,10 @@ namespace psc {
 
 enum class Flagging {
   Sensors,           ///< thesis §3.5: particles of different bodies closer than μ flag their regions
-  SensorsAndBounds,  ///< [beyond] also flag region pairs whose particle-centred bounding spheres
-                     ///< (+ margins and motion) overlap: no contact inside the radius can be missed
+  SensorsAndBounds,  ///< [beyond] also flag region pairs whose boxes (+ margins and motion)
+                     ///< overlap, found through flat per-body / per-region / per-chunk boxes refit
+                     ///< every step; the candidate pairs then come from overlapping chunks, so no
+                     ///< contact inside the radius can be missed
 };
 
 enum class AreaEstimator {
@@ -48,6 +50,8 @@ struct SensorSettings {
   ///   margin_A + margin_B + motion_factor·|x_v − x_v,prev|     (length units)
   /// Bullet's CollideVF_SS uses 2. Only used when a body has a previous-position view. ≥ 0.
   double motion_factor = 2.0;
+  /// [beyond] Vertices per chunk of the bounds layer (≥ 4): smaller = tighter boxes, more boxes.
+  std::size_t chunk_vertices = 32;
   /// Build (vertex, triangle) candidate pairs in step(); off = flagged pairs only.
   bool build_candidates = true;
 

@@ -54,7 +54,8 @@ struct FlaggedPair {
 };
 
 /// A (vertex of one body, triangle of another) pair to hand to the exact test. Each appears at
-/// most once per step. Sorted by (vertex_body, triangle_body, vertex, triangle).
+/// most once per step. StepResult::candidates is sorted by (vertex_body, triangle_body); the order
+/// inside one such group is deterministic but otherwise unspecified.
 struct CandidatePair {
   BodyId vertex_body = kInvalidBody;
   Index vertex = 0;
@@ -85,9 +86,9 @@ struct StepStats {
   std::size_t flagged_pairs = 0;
   std::size_t flagged_by_sensors = 0;
   std::size_t flagged_by_bounds_only = 0;  ///< flagged only because of the bounding spheres
-  std::size_t candidate_vertices = 0;      ///< summed over flagged pairs and directions
-  std::size_t candidate_triangles = 0;     ///< summed over flagged pairs and directions
-  std::size_t candidate_probes = 0;        ///< (vertex, triangle) box tests made in the pair grids
+  std::size_t candidate_vertices = 0;      ///< vertices examined (per flagged pair or chunk pair and direction)
+  std::size_t candidate_triangles = 0;     ///< triangles examined (likewise)
+  std::size_t candidate_probes = 0;        ///< (vertex, triangle) box tests made to find them
   std::size_t candidate_pairs = 0;         ///< unique pairs handed to the exact test
   std::size_t repartitions = 0;            ///< bodies re-partitioned this step
   double r_eff = 0.0;                      ///< R_eff used this step (length units)
