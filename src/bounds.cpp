@@ -34,27 +34,64 @@ bool inside(const Vec3& x, const Vec3& lo, const Vec3& hi, double r) {
 
 }  // namespace
 
+namespace {
+
+// The refit is the one pass that reads every vertex each step: read the view's raw scalars
+// directly instead of going through PositionView::operator[]'s per-call type switch.
+template <typename T>
+MotionBox chunkBox(const char* base, std::size_t stride, const char* prev, std::size_t prev_stride,
+                   IndexRange box_vertices, IndexRange own_vertices, double& sum) {
+  MotionBox box;
+  double lo[3] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+                  std::numeric_limits<double>::infinity()};
+  double hi[3] = {-lo[0], -lo[1], -lo[2]};
+  for (Index v : box_vertices) {
+    const T* p = reinterpret_cast<const T*>(base + v * stride);
+    for (int a = 0; a < 3; ++a) {
+      const double x = static_cast<double>(p[a]);
+      sum += x;
+      lo[a] = x < lo[a] ? x : lo[a];
+      hi[a] = x > hi[a] ? x : hi[a];
+    }
+  }
+  if (prev != nullptr)
+    for (Index v : own_vertices) {
+      const T* p = reinterpret_cast<const T*>(base + v * stride);
+      const T* q = reinterpret_cast<const T*>(prev + v * prev_stride);
+      const double dx = double(p[0]) - double(q[0]), dy = double(p[1]) - double(q[1]), dz = double(p[2]) - double(q[2]);
+      const double m2 = dx * dx + dy * dy + dz * dz;
+      sum += m2;
+      box.motion = m2 > box.motion ? m2 : box.motion;
+    }
+  box.motion = std::sqrt(box.motion);
+  box.lo = Vec3(lo[0], lo[1], lo[2]);
+  box.hi = Vec3(hi[0], hi[1], hi[2]);
+  return box;
+}
+
+}  // namespace
+
 void refitBounds(Body& b) {
   const ChunkLists& ch = b.chunks;
   b.chunk_box.resize(ch.count());
   b.region_box.assign(b.regionCount(), emptyBox());
   b.body_box = emptyBox();
   bool finite = true;
+  const char* base = static_cast<const char*>(b.positions.data());
+  const std::size_t stride = b.positions.strideBytes();
+  // The previous view is read with the current one's scalar type; mixed types take the slow path.
+  const bool same_type = b.previous.empty() || b.previous.scalar() == b.positions.scalar();
+  const char* prev = b.previous.empty() || !same_type ? nullptr : static_cast<const char*>(b.previous.data());
+  const std::size_t prev_stride = b.previous.strideBytes();
+  const bool is_float = b.positions.scalar() == PositionView::Scalar::Float32;
   for (std::size_t c = 0; c < ch.count(); ++c) {
-    MotionBox box = emptyBox();
     double sum = 0.0;  // min/max may drop a NaN silently; a plain sum keeps it
-    for (Index v : ch.box_vertices.row(c)) {
-      const Vec3 x = b.positions[v];
-      sum += x.sum();
-      box.lo = box.lo.cwiseMin(x);
-      box.hi = box.hi.cwiseMax(x);
-    }
-    if (!b.previous.empty())
-      for (Index v : ch.vertices.row(c)) {
-        const double m = (b.positions[v] - b.previous[v]).norm();
-        sum += m;
-        box.motion = std::max(box.motion, m);
-      }
+    MotionBox box = is_float ? chunkBox<float>(base, stride, prev, prev_stride, ch.box_vertices.row(c),
+                                               ch.vertices.row(c), sum)
+                             : chunkBox<double>(base, stride, prev, prev_stride, ch.box_vertices.row(c),
+                                                ch.vertices.row(c), sum);
+    if (!same_type)
+      for (Index v : ch.vertices.row(c)) box.motion = std::max(box.motion, b.vertexMotion(v));
     finite = finite && std::isfinite(sum);
     b.chunk_box[c] = box;
   }
