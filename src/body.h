@@ -41,8 +41,8 @@ struct ChunkLists {
   }
 };
 
-ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positions, const RegionLists& regions,
-                       std::size_t chunk_vertices);
+ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positions,
+                       const std::vector<Index>& region_of, std::size_t regions, std::size_t chunk_vertices);
 
 /// Axis-aligned box with the largest vertex motion inside it.
 struct MotionBox {
@@ -68,7 +68,7 @@ struct Body {
   bool partitioned = false;
   std::size_t budget = 0;
   Partition partition;
-  RegionLists regions;
+  RegionLists regions;                 ///< built only for Flagging::Sensors (thesis candidate sets)
   std::vector<Index> particle_vertex;  ///< one per region
   double mean_edge = 0.0;              ///< at (re)partitioning: μ's geometric base
   double max_edge = 0.0;               ///< at (re)partitioning: the stretch trigger's base

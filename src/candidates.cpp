@@ -15,14 +15,12 @@ void appendMerged(IndexRange a, IndexRange b, std::vector<Index>& out) {
 }
 }  // namespace
 
-void regionVertexSet(const Body& b, Index region, bool one_ring, std::vector<Index>& out) {
-  if (one_ring) appendMerged(b.regions.vertices.row(region), b.regions.ring.row(region), out);
-  else appendMerged(b.regions.vertices.row(region), IndexRange{}, out);
+void regionVertexSet(const RegionLists& lists, Index region, bool one_ring, std::vector<Index>& out) {
+  appendMerged(lists.vertices.row(region), one_ring ? lists.ring.row(region) : IndexRange{}, out);
 }
 
-void regionTriangleSet(const Body& b, Index region, bool one_ring, std::vector<Index>& out) {
-  if (one_ring) appendMerged(b.regions.triangles.row(region), b.regions.ring_triangles.row(region), out);
-  else appendMerged(b.regions.triangles.row(region), IndexRange{}, out);
+void regionTriangleSet(const RegionLists& lists, Index region, bool one_ring, std::vector<Index>& out) {
+  appendMerged(lists.triangles.row(region), one_ring ? lists.ring_triangles.row(region) : IndexRange{}, out);
 }
 
 void collectCandidates(const Body& vb, const std::vector<Index>& vertices, const Body& tb,

@@ -32,9 +32,9 @@ void collectCandidates(const Body& vb, const std::vector<Index>& vertices, const
                        const std::vector<Index>& triangles, double margin_sum, double motion_factor,
                        PairGridScratch& scratch, std::vector<std::uint64_t>& out, CandidateCounters& counters);
 
-/// Vertices of region `region` (+ ring) of `b`, ascending.
-void regionVertexSet(const Body& b, Index region, bool one_ring, std::vector<Index>& out);
-/// Triangles touching region `region` (+ ring) of `b`, ascending.
-void regionTriangleSet(const Body& b, Index region, bool one_ring, std::vector<Index>& out);
+/// Vertices of region `region` (+ ring), ascending.
+void regionVertexSet(const RegionLists& lists, Index region, bool one_ring, std::vector<Index>& out);
+/// Triangles touching region `region` (+ ring), ascending.
+void regionTriangleSet(const RegionLists& lists, Index region, bool one_ring, std::vector<Index>& out);
 
 }  // namespace psc::detail

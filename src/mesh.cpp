@@ -74,17 +74,13 @@ MeshTopology::MeshTopology(std::vector<Triangle> triangles, std::size_t vertex_c
   }
   adjacency_ = IndexRows::fromPairs(vertex_count_, adj);
   vertex_triangles_ = IndexRows::fromPairs(vertex_count_, vt);
-  edges_.reserve(adjacency_.items.size() / 2);
-  for (Index v = 0; v < vertex_count_; ++v)
-    for (Index n : neighbors(v))
-      if (v < n) edges_.push_back({v, n});
-
   std::vector<Index> parent(vertex_count_);
   std::iota(parent.begin(), parent.end(), Index{0});
-  for (const auto& e : edges_) {
-    const Index ra = findRoot(parent, e[0]), rb = findRoot(parent, e[1]);
-    if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
-  }
+  for (Index v = 0; v < vertex_count_; ++v)
+    for (Index n : neighbors(v)) {
+      const Index ra = findRoot(parent, v), rb = findRoot(parent, n);
+      if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+    }
   // Components numbered in order of their lowest vertex: deterministic.
   component_.assign(vertex_count_, kInvalidIndex);
   std::vector<Index> label(vertex_count_, kInvalidIndex);
@@ -95,9 +91,18 @@ MeshTopology::MeshTopology(std::vector<Triangle> triangles, std::size_t vertex_c
   }
 }
 
+std::vector<std::array<Index, 2>> MeshTopology::edges() const {
+  std::vector<std::array<Index, 2>> out;
+  out.reserve(edgeCount());
+  for (Index v = 0; v < vertex_count_; ++v)
+    for (Index n : neighbors(v))
+      if (v < n) out.push_back({v, n});
+  return out;
+}
+
 std::size_t MeshTopology::bytes() const {
   return triangles_.capacity() * sizeof(Triangle) + adjacency_.bytes() + vertex_triangles_.bytes() +
-         edges_.capacity() * sizeof(edges_[0]) + component_.capacity() * sizeof(Index);
+         component_.capacity() * sizeof(Index);
 }
 
 void checkFinite(const PositionView& positions, const std::string& what) {
@@ -205,16 +210,20 @@ std::vector<Vec3> vertexNormals(const MeshTopology& topology, const PositionView
 
 EdgeStats edgeStats(const MeshTopology& topology, const PositionView& positions) {
   EdgeStats s;
-  if (topology.edges().empty()) return s;
+  if (topology.edgeCount() == 0) return s;
   double sum = 0.0;
   s.min = std::numeric_limits<double>::infinity();
-  for (const auto& e : topology.edges()) {
-    const double len = (positions[e[0]] - positions[e[1]]).norm();
-    sum += len;
-    s.min = std::min(s.min, len);
-    s.max = std::max(s.max, len);
+  for (Index v = 0; v < topology.vertexCount(); ++v) {
+    const Vec3 p = positions[v];
+    for (Index n : topology.neighbors(v)) {
+      if (n < v) continue;
+      const double len = (positions[n] - p).norm();
+      sum += len;
+      s.min = std::min(s.min, len);
+      s.max = std::max(s.max, len);
+    }
   }
-  s.mean = sum / static_cast<double>(topology.edges().size());
+  s.mean = sum / static_cast<double>(topology.edgeCount());
   return s;
 }
 

@@ -68,8 +68,8 @@ void splitChunks(std::vector<Index>& ids, std::size_t begin, std::size_t end, st
 
 }  // namespace
 
-ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positions, const RegionLists& regions,
-                       std::size_t chunk_vertices) {
+ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positions,
+                       const std::vector<Index>& region_of, std::size_t regions, std::size_t chunk_vertices) {
   ChunkLists out;
   std::vector<Index> chunk_of(topology.vertexCount(), kInvalidIndex);
   std::vector<std::pair<Index, Index>> vpairs, tpairs, bpairs;
@@ -77,8 +77,12 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
   std::vector<std::pair<std::size_t, std::size_t>> ranges;
   Index chunk = 0;
   out.region_begin.push_back(0);
-  for (std::size_t r = 0; r < regions.vertices.rows(); ++r) {
-    const IndexRange row = regions.vertices.row(r);
+  std::vector<std::pair<Index, Index>> members;
+  members.reserve(topology.vertexCount());
+  for (Index v = 0; v < topology.vertexCount(); ++v) members.emplace_back(region_of[v], v);
+  const IndexRows by_region = IndexRows::fromPairs(regions, members);
+  for (std::size_t r = 0; r < regions; ++r) {
+    const IndexRange row = by_region.row(r);
     ids.assign(row.begin(), row.end());
     ranges.clear();
     if (!ids.empty()) splitChunks(ids, 0, ids.size(), chunk_vertices, positions, ranges);

@@ -100,7 +100,10 @@ struct SensorWorld::Impl {
 void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
   const bool again = b.partitioned;
   b.partition = partitionLBG(*b.topology, b.positions, count, settings.partition);
-  b.regions = detail::buildRegionLists(*b.topology, b.partition.region_of, b.partition.regionCount());
+  // The thesis's candidate sets need per-region lists; the bounds layer needs only the chunks.
+  b.regions = settings.flagging == Flagging::Sensors
+                  ? detail::buildRegionLists(*b.topology, b.partition.region_of, b.partition.regionCount())
+                  : detail::RegionLists{};
   b.particle_vertex = b.partition.seed_vertex;
   const EdgeStats es = edgeStats(*b.topology, b.positions);
   b.mean_edge = es.mean;
@@ -109,7 +112,8 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
       regionAreas(*b.topology, b.positions, b.partition, b.particle_vertex, settings.repartition.estimator);
   b.area_star = areas.empty() ? 0.0 : *std::max_element(areas.begin(), areas.end());
   b.diameter = 2.0 * bounds(b.positions).radius;
-  b.chunks = detail::buildChunks(*b.topology, b.positions, b.regions, settings.chunk_vertices);
+  b.chunks = detail::buildChunks(*b.topology, b.positions, b.partition.region_of, b.partition.regionCount(),
+                                 settings.chunk_vertices);
   b.budget = count;
   b.partitioned = true;
   // Bodies are checked on staggered steps so the O(M) checks do not all land on one step.
@@ -267,8 +271,8 @@ void SensorWorld::Impl::buildCandidates(StepStats& stats) {
   std::vector<CandidatePair>& out = result.candidates;
   detail::CandidateCounters counters;
   const auto direction = [&](const Body& vb, Index vregion, const Body& tb, Index tregion) {
-    detail::regionVertexSet(vb, vregion, settings.one_ring, vset);
-    detail::regionTriangleSet(tb, tregion, settings.one_ring, tset);
+    detail::regionVertexSet(vb.regions, vregion, settings.one_ring, vset);
+    detail::regionTriangleSet(tb.regions, tregion, settings.one_ring, tset);
     keys.clear();
     detail::collectCandidates(vb, vset, tb, tset, vb.margin + tb.margin, settings.motion_factor, pair_scratch, keys,
                               counters);
@@ -513,8 +517,15 @@ CandidateSet SensorWorld::candidateSet(const FlaggedPair& pair, BodyId vertex_bo
   CandidateSet out;
   out.vertex_body = vb.id;
   out.triangle_body = tb.id;
-  detail::regionVertexSet(vb, a_side ? pair.region_a : pair.region_b, impl_->settings.one_ring, out.vertices);
-  detail::regionTriangleSet(tb, a_side ? pair.region_b : pair.region_a, impl_->settings.one_ring, out.triangles);
+  // Outside the thesis mode the region lists are not kept: build them for this query.
+  const auto lists = [](const Body& b) {
+    return b.regions.vertices.rows() == b.regionCount()
+               ? b.regions
+               : detail::buildRegionLists(*b.topology, b.partition.region_of, b.regionCount());
+  };
+  const detail::RegionLists vl = lists(vb), tl = lists(tb);
+  detail::regionVertexSet(vl, a_side ? pair.region_a : pair.region_b, impl_->settings.one_ring, out.vertices);
+  detail::regionTriangleSet(tl, a_side ? pair.region_b : pair.region_a, impl_->settings.one_ring, out.triangles);
   return out;
 }
 

@@ -80,8 +80,9 @@ class MeshTopology {
   IndexRange neighbors(Index v) const { return adjacency_.row(v); }
   /// Triangles incident to v (sorted ascending).
   IndexRange vertexTriangles(Index v) const { return vertex_triangles_.row(v); }
-  /// Unique undirected edges (a < b), sorted.
-  const std::vector<std::array<Index, 2>>& edges() const { return edges_; }
+  /// Unique undirected edges (a < b), sorted; built on each call from the adjacency.
+  std::vector<std::array<Index, 2>> edges() const;
+  std::size_t edgeCount() const { return adjacency_.items.size() / 2; }
 
   /// Connected component of each vertex (over shared triangles); isolated vertices get their own.
   const std::vector<Index>& componentOf() const { return component_; }
@@ -95,7 +96,6 @@ class MeshTopology {
   std::size_t vertex_count_ = 0;
   IndexRows adjacency_;
   IndexRows vertex_triangles_;
-  std::vector<std::array<Index, 2>> edges_;
   std::vector<Index> component_;
   std::size_t component_count_ = 0;
 };
