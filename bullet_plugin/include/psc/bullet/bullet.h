@@ -1,0 +1,7 @@
+// Umbrella header of psc::bullet, the Bullet 3.24 soft-body plugin of psc.
+#pragma once
+
+#include "psc/bullet/plugin.h"
+#include "psc/bullet/precision.h"
+#include "psc/bullet/settings.h"
+#include "psc/bullet/stats.h"

@@ -1,0 +1,38 @@
+// Settings of the Bullet plugin. Defaults live here, units in the comments.
+#pragma once
+
+#include "psc/bullet/precision.h"
+#include "psc/settings.h"
+
+namespace psc::bullet {
+
+/// Which soft bodies the particle sensors handle when no per-body choice was made with
+/// Plugin::setEnabled(). A soft-soft pair goes to the sensors only when both bodies participate;
+/// any other pair is handed, unchanged, to the algorithm Bullet had registered before install()
+/// (by default btSoftSoftCollisionAlgorithm, i.e. btSoftBody::defaultCollisionHandler).
+enum class OptIn {
+  /// A body participates when `m_cfg.collisions` contains btSoftBody::fCollision::VF_SS, the flag
+  /// that already switches on Bullet's own vertex-face soft-soft collision (off by default).
+  /// Existing programs keep their meaning: the pairs Bullet collided are now collided by sensors.
+  VfSsFlag,
+  /// Only bodies passed to Plugin::setEnabled(body, true) participate; their VF_SS flag is not
+  /// needed. Leaving VF_SS off also spares Bullet's per-step refit of the body's face tree.
+  Explicit,
+};
+
+struct Settings {
+  /// The core's settings (μ, R_eff, rounds, flagging, partitioning). `sensors.motion_factor` = 2
+  /// matches the motion term of Bullet's CollideVF_SS acceptance radius; less lets the flagged
+  /// regions fall short of what Bullet would accept for fast nodes.
+  psc::SensorSettings sensors;
+  OptIn opt_in = OptIn::VfSsFlag;
+  /// [beyond] Also collide participating body pairs that have candidates but were not dispatched
+  /// because their broadphase boxes do not overlap. Bullet 3.24 bounds a soft body by its nodes
+  /// ± its margin, while CollideVF_SS accepts out to margin_A + margin_B + 2·|m_x − m_q|: for fast
+  /// nodes the broadphase alone drops contacts inside Bullet's own radius. Bullet's filtering still
+  /// applies (collision groups and masks, the pair cache's overlap filter callback,
+  /// btCollisionObject::checkCollideWith, deactivation). false: only dispatched pairs are collided.
+  bool beyond_broadphase = true;
+};
+
+}  // namespace psc::bullet

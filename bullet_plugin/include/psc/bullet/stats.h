@@ -1,0 +1,41 @@
+// What the plugin did in one simulation step.
+#pragma once
+
+#include "psc/bullet/precision.h"
+#include "psc/world.h"
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+namespace psc::bullet {
+
+/// Counters of the most recent simulation step in which Bullet dispatched at least one soft-soft
+/// pair (the sensors are stepped lazily at the first such pair; see Plugin). Complete once
+/// btSoftRigidDynamicsWorld::stepSimulation() has returned.
+struct Stats {
+  std::uint64_t sensor_steps = 0;     ///< sensor steps since install()
+  std::size_t bodies = 0;             ///< soft bodies handled by the sensors this step
+  std::size_t skipped_bodies = 0;     ///< participating bodies the core cannot take (no faces, rejected mesh)
+  std::size_t particles = 0;
+  int rounds = 0;                     ///< particle movement rounds (Jacobi sweeps)
+  std::size_t round_cap_hits = 0;     ///< 1 when SensorSettings::max_rounds stopped the movement
+  std::size_t flagged_pairs = 0;      ///< flagged region pairs
+  std::size_t candidate_pairs = 0;    ///< unique (node, face) pairs the core handed over, all bodies
+  std::size_t repartitions = 0;       ///< bodies re-partitioned this step
+  std::size_t body_pairs = 0;         ///< soft-soft pairs collided through the sensors
+  std::size_t beyond_broadphase_pairs = 0;  ///< of body_pairs: collided although not dispatched (Settings::beyond_broadphase)
+  std::size_t fallback_pairs = 0;     ///< soft-soft pairs handed to Bullet's previous algorithm
+  std::size_t exact_tests = 0;        ///< CollideVF_SS tests run (one per candidate of a dispatched pair)
+  std::size_t contacts = 0;           ///< btSoftBody::SContacts produced
+  double ms_sensor_step = 0.0;        ///< body synchronisation + SensorWorld::step(), wall clock
+  double ms_exact = 0.0;              ///< the exact stage, summed over the step's pairs, wall clock
+  /// Non-empty when the core rejected this step (e.g. a non-finite node position): every pair then
+  /// went to Bullet's previous algorithm instead. Never thrown through Bullet's dispatch.
+  std::string error;
+  /// The core's message for the first participating body it does not hold (see skipped_bodies).
+  std::string skipped_reason;
+  psc::StepStats core;                ///< the core's own breakdown of the sensor step
+};
+
+}  // namespace psc::bullet

@@ -1,0 +1,187 @@
+#include "body_registry.h"
+
+#include "psc/error.h"
+
+#include <BulletCollision/BroadphaseCollision/btBroadphaseProxy.h>
+
+#include <string>
+#include <utility>
+
+namespace psc::bullet::detail {
+namespace {
+
+// Node positions read in place: m_x is the predicted position once predictMotion has run, m_q the
+// position before it (BULLET_INTEGRATION.md).
+psc::PositionView nodeView(const btSoftBody& body, bool previous) {
+  const btSoftBody::Node& first = body.m_nodes[0];
+  const btScalar* xyz = previous ? first.m_q.m_floats : first.m_x.m_floats;
+  return psc::PositionView(xyz, static_cast<std::size_t>(body.m_nodes.size()), sizeof(btSoftBody::Node));
+}
+
+/// Face k is triangle k, so the core's triangle indices are indices into m_faces.
+std::vector<psc::Triangle> trianglesOf(const btSoftBody& body, const std::string& name) {
+  if (body.m_nodes.size() == 0 || body.m_faces.size() == 0)
+    throw psc::Error(psc::ErrorCode::InvalidMesh, name + " has no faces (a rope or a point cloud)");
+  const btSoftBody::Node* first = &body.m_nodes[0];
+  const std::ptrdiff_t count = body.m_nodes.size();
+  std::vector<psc::Triangle> triangles(static_cast<std::size_t>(body.m_faces.size()));
+  for (int f = 0; f < body.m_faces.size(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const std::ptrdiff_t node = body.m_faces[f].m_n[k] - first;
+      if (node < 0 || node >= count)
+        throw psc::Error(psc::ErrorCode::InvalidMesh,
+                         name + ": face " + std::to_string(f) + " refers to a node outside m_nodes");
+      triangles[static_cast<std::size_t>(f)][static_cast<std::size_t>(k)] = static_cast<psc::Index>(node);
+    }
+  }
+  return triangles;
+}
+
+double marginOf(const btSoftBody& body) { return body.getCollisionShape()->getMargin(); }
+
+std::string nameOf(const btSoftBody& body) {
+  return "btSoftBody #" + std::to_string(body.getWorldArrayIndex());
+}
+
+void countRejected(const std::string& message, SyncCounters& counters) {
+  ++counters.skipped;
+  if (counters.first_rejection.empty()) counters.first_rejection = message;
+}
+
+}  // namespace
+
+BodyRegistry::Fingerprint BodyRegistry::fingerprintOf(const btSoftBody& body) {
+  Fingerprint print;
+  print.node_count = body.m_nodes.size();
+  print.nodes = print.node_count > 0 ? static_cast<const void*>(&body.m_nodes[0]) : nullptr;
+  print.face_count = body.m_faces.size();
+  print.faces = print.face_count > 0 ? static_cast<const void*>(&body.m_faces[0]) : nullptr;
+  const btBroadphaseProxy* proxy = body.getBroadphaseHandle();
+  print.proxy = proxy;
+  print.proxy_id = proxy != nullptr ? proxy->getUid() : -1;
+  return print;
+}
+
+void BodyRegistry::sync(const btAlignedObjectArray<btSoftBody*>& world_bodies, const Participates& participates,
+                        psc::SensorWorld& sensors, SyncCounters& counters, std::vector<const btSoftBody*>& left) {
+  for (auto& entry : records_) entry.second.seen = false;
+  std::unordered_set<const btSoftBody*> now;
+  now.reserve(static_cast<std::size_t>(world_bodies.size()));
+  for (int i = 0; i < world_bodies.size(); ++i) {
+    btSoftBody* body = world_bodies[i];
+    if (body == nullptr || !now.insert(body).second) continue;
+    auto it = records_.find(body);
+    if (!participates(*body)) {
+      if (it != records_.end()) {
+        if (it->second.id != psc::kInvalidBody) sensors.removeBody(it->second.id);
+        records_.erase(it);
+      }
+      continue;
+    }
+    if (it == records_.end()) {
+      it = records_.emplace(body, Record{}).first;
+      dirty_.erase(body);
+      add(*body, it->second, sensors, counters);
+    } else {
+      update(*body, it->second, sensors, counters);
+    }
+    it->second.seen = true;
+  }
+  // Bodies that left the world: their memory may be gone, so only their ids are used.
+  for (auto it = records_.begin(); it != records_.end();) {
+    if (it->second.seen) {
+      ++it;
+      continue;
+    }
+    if (it->second.id != psc::kInvalidBody) sensors.removeBody(it->second.id);
+    it = records_.erase(it);
+  }
+  bodies_.clear();
+  for (int i = 0; i < world_bodies.size(); ++i) {
+    const auto it = records_.find(world_bodies[i]);
+    if (it != records_.end() && it->second.id != psc::kInvalidBody) bodies_[it->second.id] = world_bodies[i];
+  }
+  for (const btSoftBody* body : present_) {
+    if (now.count(body) == 0) {
+      left.push_back(body);
+      dirty_.erase(body);
+    }
+  }
+  present_ = std::move(now);
+}
+
+void BodyRegistry::add(btSoftBody& body, Record& record, psc::SensorWorld& sensors, SyncCounters& counters) {
+  record.print = fingerprintOf(body);
+  record.margin = marginOf(body);
+  record.id = psc::kInvalidBody;
+  record.rejection.clear();
+  try {
+    psc::BodyDesc desc;
+    desc.name = nameOf(body);
+    desc.triangles = trianglesOf(body, desc.name);
+    desc.positions = nodeView(body, false);
+    desc.previous = nodeView(body, true);
+    desc.margin = record.margin;
+    record.id = sensors.addBody(desc);
+    ++counters.bodies;
+  } catch (const psc::Error& error) {
+    record.rejection = error.what();
+    countRejected(record.rejection, counters);
+  }
+}
+
+void BodyRegistry::update(btSoftBody& body, Record& record, psc::SensorWorld& sensors, SyncCounters& counters) {
+  const Fingerprint print = fingerprintOf(body);
+  const bool dirty = dirty_.erase(&body) > 0;
+  if (!print.sameBody(record.print)) {
+    // Removed and re-added, or another body at a recycled address: start afresh.
+    if (record.id != psc::kInvalidBody) sensors.removeBody(record.id);
+    add(body, record, sensors, counters);
+    return;
+  }
+  if (record.id == psc::kInvalidBody) {
+    const bool changed = dirty || !print.sameMesh(record.print) || print.nodes != record.print.nodes;
+    if (changed) {
+      add(body, record, sensors, counters);
+    } else {
+      countRejected(record.rejection, counters);
+    }
+    return;
+  }
+  try {
+    const std::string name = nameOf(body);
+    if (dirty || !print.sameMesh(record.print)) {
+      // First: it throws for a body left without nodes or faces, before m_nodes[0] is touched.
+      std::vector<psc::Triangle> triangles = trianglesOf(body, name);
+      sensors.replaceMesh(record.id, std::move(triangles), nodeView(body, false), nodeView(body, true));
+    } else if (print.nodes != record.print.nodes) {
+      sensors.setPositions(record.id, nodeView(body, false), nodeView(body, true));
+    }
+    record.print = print;
+    const double margin = marginOf(body);
+    if (margin != record.margin) {
+      sensors.setMargin(record.id, margin);
+      record.margin = margin;
+    }
+    ++counters.bodies;
+  } catch (const psc::Error& error) {
+    if (sensors.hasBody(record.id)) sensors.removeBody(record.id);
+    record.id = psc::kInvalidBody;
+    record.print = print;
+    record.rejection = error.what();
+    countRejected(record.rejection, counters);
+  }
+}
+
+std::optional<psc::BodyId> BodyRegistry::idOf(const btSoftBody* body) const {
+  const auto it = records_.find(body);
+  if (it == records_.end() || it->second.id == psc::kInvalidBody) return std::nullopt;
+  return it->second.id;
+}
+
+btSoftBody* BodyRegistry::bodyOf(psc::BodyId id) const {
+  const auto it = bodies_.find(id);
+  return it == bodies_.end() ? nullptr : it->second;
+}
+
+}  // namespace psc::bullet::detail

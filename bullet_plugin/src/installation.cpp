@@ -1,0 +1,239 @@
+#include "installation.h"
+
+#include "dispatcher_access.h"
+#include "exact_stage.h"
+#include "psc/error.h"
+
+#include <BulletCollision/BroadphaseCollision/btOverlappingPairCache.h>
+#include <BulletCollision/CollisionDispatch/btCollisionDispatcher.h>
+#include <BulletSoftBody/btSoftRigidDynamicsWorld.h>
+
+#include <algorithm>
+#include <cassert>
+#include <chrono>
+#include <tuple>
+#include <utility>
+
+namespace psc::bullet {
+namespace {
+
+constexpr int kSoft = SOFTBODY_SHAPE_PROXYTYPE;
+
+/// btDiscreteDynamicsWorld::internalSingleStepSimulation sets btDispatcherInfo::m_stepCount to 0
+/// after predictUnconstraintMotion and before the collision dispatch, on every internal step, and
+/// nothing in Bullet 3.24 reads it. The plugin stores this value there once it has stepped the
+/// sensors, so "m_stepCount != kSensed" means exactly "a new step has predicted its motion and the
+/// sensors have not seen it yet" (a second dispatch within the step, e.g. from a tick callback,
+/// sees kSensed). The value spells "psc!".
+constexpr int kSensed = 0x70736321;
+
+btCollisionDispatcher& collisionDispatcherOf(btSoftRigidDynamicsWorld& world) {
+  auto* dispatcher = dynamic_cast<btCollisionDispatcher*>(world.getDispatcher());
+  if (dispatcher == nullptr)
+    throw psc::Error(psc::ErrorCode::InvalidArgument,
+                     "psc::bullet::install: the world's dispatcher is not a btCollisionDispatcher");
+  return *dispatcher;
+}
+
+double millisecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+/// StepResult::candidates is sorted by (vertex_body, triangle_body), so the pairs of one
+/// direction of one body pair are a contiguous run.
+std::pair<const psc::CandidatePair*, const psc::CandidatePair*> candidatesOf(
+    const std::vector<psc::CandidatePair>& candidates, psc::BodyId vertex_body, psc::BodyId triangle_body) {
+  const auto key = std::make_pair(vertex_body, triangle_body);
+  const auto less = [](const psc::CandidatePair& c, const std::pair<psc::BodyId, psc::BodyId>& k) {
+    return std::tie(c.vertex_body, c.triangle_body) < std::tie(k.first, k.second);
+  };
+  const auto greater = [](const std::pair<psc::BodyId, psc::BodyId>& k, const psc::CandidatePair& c) {
+    return std::tie(k.first, k.second) < std::tie(c.vertex_body, c.triangle_body);
+  };
+  const auto first = std::lower_bound(candidates.begin(), candidates.end(), key, less);
+  const auto last = std::upper_bound(first, candidates.end(), key, greater);
+  const psc::CandidatePair* base = candidates.data();
+  return {base + (first - candidates.begin()), base + (last - candidates.begin())};
+}
+
+}  // namespace
+
+Installation::Installation(btSoftRigidDynamicsWorld& world, const Settings& settings)
+    : world_(world), dispatcher_(collisionDispatcherOf(world)), settings_(settings), sensors_(settings.sensors) {
+  previous_ = detail::DispatcherAccess::contactCreateFunc(dispatcher_, kSoft, kSoft);
+  if (dynamic_cast<const detail::SoftSoftCreateFunc*>(previous_) != nullptr)
+    throw psc::Error(psc::ErrorCode::InvalidArgument,
+                     "psc::bullet::install: a psc::bullet plugin is already installed on this world's dispatcher");
+  dispatcher_.registerCollisionCreateFunc(kSoft, kSoft, &create_func_);
+  world_.addAction(&end_of_dispatch_);
+  // A plugin installed earlier on this world may have marked the current step as sensed.
+  world_.getDispatchInfo().m_stepCount = 0;
+  refreshSoftBodyPairs();
+}
+
+Installation::~Installation() {
+  // Give back the previous algorithm only if nobody registered over ours meanwhile.
+  if (detail::DispatcherAccess::contactCreateFunc(dispatcher_, kSoft, kSoft) == &create_func_)
+    dispatcher_.registerCollisionCreateFunc(kSoft, kSoft, previous_);
+  world_.removeAction(&end_of_dispatch_);
+  refreshSoftBodyPairs();
+  // Every algorithm of ours sat in a soft-soft pair of this world's pair cache; one that survived
+  // would call into freed memory at the next dispatch.
+  assert(live_algorithms_.load() == 0);
+}
+
+void Installation::refreshSoftBodyPairs() {
+  btOverlappingPairCache* cache = world_.getBroadphase()->getOverlappingPairCache();
+  btBroadphasePairArray& pairs = cache->getOverlappingPairArray();
+  for (int i = 0; i < pairs.size(); ++i) {
+    btBroadphasePair& pair = pairs[i];
+    if (pair.m_algorithm == nullptr || pair.m_pProxy0 == nullptr || pair.m_pProxy1 == nullptr) continue;
+    const auto* object0 = static_cast<const btCollisionObject*>(pair.m_pProxy0->m_clientObject);
+    const auto* object1 = static_cast<const btCollisionObject*>(pair.m_pProxy1->m_clientObject);
+    // Only soft-soft pairs: soft-rigid pairs keep their algorithms (and anything they cache).
+    if (btSoftBody::upcast(object0) != nullptr && btSoftBody::upcast(object1) != nullptr)
+      cache->cleanOverlappingPair(pair, &dispatcher_);
+  }
+}
+
+void EndOfDispatch::updateAction(btCollisionWorld*, btScalar) { owner_.endOfDispatch(); }
+
+bool Installation::collide(btSoftBody& a, btSoftBody& b) noexcept {
+  std::lock_guard<std::mutex> lock(mutex_);
+  try {
+    senseOncePerStep();
+    if (!step_ok_) return false;
+    const std::optional<psc::BodyId> id_a = registry_.idOf(&a);
+    const std::optional<psc::BodyId> id_b = registry_.idOf(&b);
+    if (!id_a || !id_b || *id_a == *id_b) return false;
+    collidePair(a, *id_a, b, *id_b);
+    return true;
+  } catch (const std::exception& error) {
+    stats_.error = error.what();
+  } catch (...) {
+    stats_.error = "unknown exception in psc::bullet's soft-soft collision";
+  }
+  return false;
+}
+
+void Installation::collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, psc::BodyId id_b) {
+  const std::uint64_t key = (std::uint64_t{std::min(id_a, id_b)} << 32) | std::max(id_a, id_b);
+  // A second dispatch in the same step (e.g. a manual performDiscreteCollisionDetection) would
+  // push every contact again: each (node, face) is tested at most once a step.
+  if (!collided_pairs_.insert(key).second) return;
+  const auto start = std::chrono::steady_clock::now();
+  const std::vector<psc::CandidatePair>& candidates = sensors_.lastResult().candidates;
+  detail::ExactCounters counters;
+  const auto ab = candidatesOf(candidates, id_a, id_b);
+  detail::collideCandidates(a, b, ab.first, ab.second, counters);
+  const auto ba = candidatesOf(candidates, id_b, id_a);
+  detail::collideCandidates(b, a, ba.first, ba.second, counters);
+  stats_.exact_tests += counters.tests;
+  stats_.contacts += counters.contacts;
+  ++stats_.body_pairs;
+  stats_.ms_exact += millisecondsSince(start);
+}
+
+void Installation::endOfDispatch() noexcept {
+  std::lock_guard<std::mutex> lock(mutex_);
+  try {
+    senseOncePerStep();
+    if (step_ok_ && settings_.beyond_broadphase) collideUndispatchedPairs();
+  } catch (const std::exception& error) {
+    stats_.error = error.what();
+  } catch (...) {
+    stats_.error = "unknown exception in psc::bullet's soft-soft collision";
+  }
+}
+
+void Installation::collideUndispatchedPairs() {
+  const std::vector<psc::CandidatePair>& candidates = sensors_.lastResult().candidates;
+  btOverlappingPairCache* cache = world_.getBroadphase()->getOverlappingPairCache();
+  for (std::size_t i = 0; i < candidates.size();) {
+    const psc::BodyId vb = candidates[i].vertex_body;
+    const psc::BodyId tb = candidates[i].triangle_body;
+    while (i < candidates.size() && candidates[i].vertex_body == vb && candidates[i].triangle_body == tb) ++i;
+    const std::uint64_t key = (std::uint64_t{std::min(vb, tb)} << 32) | std::max(vb, tb);
+    if (collided_pairs_.count(key) != 0) continue;
+    btSoftBody* a = registry_.bodyOf(vb);
+    btSoftBody* b = registry_.bodyOf(tb);
+    if (a == nullptr || b == nullptr || a->getBroadphaseHandle() == nullptr || b->getBroadphaseHandle() == nullptr)
+      continue;
+    if (!cache->needsBroadphaseCollision(a->getBroadphaseHandle(), b->getBroadphaseHandle()) ||
+        !dispatcher_.needsCollision(a, b))
+      continue;
+    collidePair(*a, vb, *b, tb);
+    ++stats_.beyond_broadphase_pairs;
+  }
+}
+
+void Installation::countFallback() noexcept {
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++stats_.fallback_pairs;
+}
+
+bool Installation::sensedThisStep() const { return world_.getDispatchInfo().m_stepCount == kSensed; }
+
+void Installation::senseOncePerStep() {
+  // Lazily, at the first soft-soft pair of a step (or at the end of its dispatch when there was
+  // none): predictMotion has run for every soft body by then (m_x predicted, m_q previous).
+  if (sensedThisStep()) return;
+  world_.getDispatchInfo().m_stepCount = kSensed;
+  collided_pairs_.clear();
+  const std::uint64_t sensor_steps = stats_.sensor_steps + 1;
+  stats_ = Stats{};
+  stats_.sensor_steps = sensor_steps;
+  step_ok_ = false;
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    detail::SyncCounters sync;
+    std::vector<const btSoftBody*> left;
+    registry_.sync(
+        world_.getSoftBodyArray(), [this](const btSoftBody& body) { return participates(body); }, sensors_, sync,
+        left);
+    for (const btSoftBody* body : left) overrides_.erase(body);
+    stats_.bodies = sync.bodies;
+    stats_.skipped_bodies = sync.skipped;
+    stats_.skipped_reason = sync.first_rejection;
+    const psc::StepResult& result = sensors_.step();
+    stats_.core = result.stats;
+    stats_.particles = result.stats.particles;
+    stats_.rounds = result.stats.rounds;
+    stats_.round_cap_hits = result.stats.round_cap_hits;
+    stats_.flagged_pairs = result.stats.flagged_pairs;
+    stats_.candidate_pairs = result.candidates.size();
+    stats_.repartitions = result.stats.repartitions;
+    step_ok_ = true;
+  } catch (const std::exception& error) {
+    stats_.error = error.what();
+  }
+  stats_.ms_sensor_step = millisecondsSince(start);
+}
+
+void Installation::setEnabled(const btSoftBody* body, std::optional<bool> enabled) {
+  if (body == nullptr) return;
+  if (enabled) {
+    overrides_[body] = *enabled;
+  } else {
+    overrides_.erase(body);
+  }
+}
+
+bool Installation::participates(const btSoftBody& body) const {
+  const auto it = overrides_.find(&body);
+  if (it != overrides_.end()) return it->second;
+  return settings_.opt_in == OptIn::VfSsFlag && (body.m_cfg.collisions & btSoftBody::fCollision::VF_SS) != 0;
+}
+
+void Installation::refreshBody(const btSoftBody* body) {
+  if (body != nullptr) registry_.markDirty(body);
+}
+
+std::optional<psc::BodyId> Installation::bodyId(const btSoftBody* body) const { return registry_.idOf(body); }
+
+bool Installation::owns(const btCollisionAlgorithm* algorithm) const {
+  const auto* ours = dynamic_cast<const detail::SoftSoftAlgorithm*>(algorithm);
+  return ours != nullptr && &ours->owner() == this;
+}
+
+}  // namespace psc::bullet

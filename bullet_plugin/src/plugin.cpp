@@ -1,0 +1,58 @@
+#include "psc/bullet/plugin.h"
+
+#include "installation.h"
+#include "precision_guard.h"
+#include "psc/error.h"
+
+#include <cassert>
+#include <utility>
+
+namespace psc::bullet {
+
+Plugin::Plugin(std::unique_ptr<Installation> installation) : impl_(std::move(installation)) {}
+Plugin::~Plugin() = default;
+Plugin::Plugin(Plugin&&) noexcept = default;
+Plugin& Plugin::operator=(Plugin&&) noexcept = default;
+
+void Plugin::uninstall() { impl_.reset(); }
+
+void Plugin::setEnabled(const btSoftBody* body, bool enabled) {
+  if (impl_) impl_->setEnabled(body, enabled);
+}
+
+void Plugin::clearEnabled(const btSoftBody* body) {
+  if (impl_) impl_->setEnabled(body, std::nullopt);
+}
+
+bool Plugin::participates(const btSoftBody* body) const {
+  return impl_ && body != nullptr && impl_->participates(*body);
+}
+
+void Plugin::refreshBody(const btSoftBody* body) {
+  if (impl_) impl_->refreshBody(body);
+}
+
+const Stats& Plugin::stats() const {
+  static const Stats kNothing;
+  return impl_ ? impl_->stats() : kNothing;
+}
+
+const psc::SensorWorld& Plugin::sensorWorld() const {
+  if (!impl_) throw psc::Error(psc::ErrorCode::InvalidArgument, "psc::bullet::Plugin: not installed");
+  return impl_->sensorWorld();
+}
+
+std::optional<psc::BodyId> Plugin::bodyId(const btSoftBody* body) const {
+  return impl_ ? impl_->bodyId(body) : std::nullopt;
+}
+
+bool Plugin::owns(const btCollisionAlgorithm* algorithm) const { return impl_ && impl_->owns(algorithm); }
+
+Plugin install(btSoftRigidDynamicsWorld& world, const Settings& settings, PrecisionTag<btScalar>) {
+  const bool guard = detail::precisionGuardLinked();
+  assert(guard);
+  (void)guard;
+  return Plugin(std::make_unique<Installation>(world, settings));
+}
+
+}  // namespace psc::bullet

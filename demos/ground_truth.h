@@ -1,0 +1,171 @@
+// The contacts that exist (BENCHMARK.md "Ground truth"), computed independently of both
+// pipelines: a dense uniform grid over the triangles of all bodies and an exact point-triangle
+// distance in double. Shares no candidate-finding code with psc::core or the plugin; a test checks
+// it against the brute-force reference below on small scenes, both radii.
+//
+// For bodies A ≠ B, vertex v of A and triangle t of B are in contact when dist(v, t) < r with
+//   strict: r = margin_A + margin_B
+//   full:   r = margin_A + margin_B + 2·|x_v − x_v,prev|   (exactly Bullet's CollideVF_SS radius)
+// Bullet decides in single precision; a pair within a thin band around r (tolerance below) could go
+// either way on rounding alone, so it is classed Ambiguous: neither required for recall nor counted
+// as "outside the truth".
+#pragma once
+
+#include "psc/types.h"
+
+#include <cstdint>
+#include <vector>
+
+namespace psc::demo {
+
+/// One body as the truth sees it. Positions at the moment contacts are decided (in Bullet: m_x
+/// after predictMotion) and one step earlier (m_q).
+struct TruthBody {
+  std::vector<Vec3> x;
+  std::vector<Vec3> prev;           ///< same size as x; may equal x (no motion term)
+  std::vector<Triangle> triangles;
+  double margin = 0.0;              ///< length units
+  bool closed = false;              ///< closed surface: vertices of others can be inside it
+};
+
+/// A vertex of one body against a triangle of another. Ordered by all four fields.
+struct ContactKey {
+  Index vertex_body = 0;
+  Index vertex = 0;
+  Index triangle_body = 0;
+  Index triangle = 0;
+  bool operator==(const ContactKey& o) const {
+    return vertex_body == o.vertex_body && vertex == o.vertex && triangle_body == o.triangle_body && triangle == o.triangle;
+  }
+  bool operator<(const ContactKey& o) const {
+    if (vertex_body != o.vertex_body) return vertex_body < o.vertex_body;
+    if (triangle_body != o.triangle_body) return triangle_body < o.triangle_body;
+    if (vertex != o.vertex) return vertex < o.vertex;
+    return triangle < o.triangle;
+  }
+};
+
+enum class Membership : std::uint8_t { Outside, Ambiguous, Inside };
+
+struct TruthContact {
+  ContactKey key;
+  Membership strict = Membership::Outside;
+  Membership full = Membership::Outside;  ///< Outside when the full radius was not asked for
+  double distance = 0.0;
+};
+
+struct TruthSettings {
+  bool strict = true;
+  bool full = true;
+  /// Half-width of the Ambiguous band: band_relative·r + band_absolute (length units). The caller
+  /// sets band_absolute from the precision of the positions it was given (float: ~1e-6 × scene size).
+  double band_relative = 1e-5;
+  double band_absolute = 0.0;
+};
+
+struct TruthResult {
+  std::vector<TruthContact> contacts;  ///< sorted by key; every pair not Outside for some asked radius
+  std::size_t strict_inside = 0, strict_ambiguous = 0;
+  std::size_t full_inside = 0, full_ambiguous = 0;
+  std::size_t distance_tests = 0;      ///< exact distances computed (a cost figure)
+  const TruthContact* find(const ContactKey& key) const;  ///< binary search; nullptr if absent
+};
+
+/// Squared distance from p to triangle (a, b, c), exact up to double rounding (Ericson, Real-Time
+/// Collision Detection §5.1.5); degenerate triangles fall back to their edges.
+double pointTriangleDistanceSquared(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+
+struct Penetration;
+class TriangleGrid;
+Penetration measurePenetration(const std::vector<TruthBody>& bodies, TriangleGrid& grid);
+
+/// Uniform grid over all triangles of all bodies, rebuilt from scratch for each query set.
+class TriangleGrid {
+ public:
+  /// cell ≤ 0: chosen from the mean edge length; the cell count is capped near 2× the triangles.
+  void build(const std::vector<TruthBody>& bodies, double cell = 0.0);
+
+  /// Calls f(body, triangle) once for every triangle whose bounding box meets [lo, hi].
+  template <class F>
+  void forEachInBox(const Vec3& lo, const Vec3& hi, F&& f) const;
+
+  /// Parity of the crossings of the ray from p along +axis (0, 1, 2) with `body`'s triangles.
+  /// Edges and vertices hit exactly are counted once by a consistent tie rule.
+  bool rayParityOdd(const Vec3& p, Index body, int axis) const;
+
+  /// Distance from p to the nearest triangle of `body`, searching outward from `start` (> 0).
+  double nearestDistance(const Vec3& p, Index body, double start) const;
+
+  double cellSize() const { return cell_; }
+  std::size_t triangleCount() const { return tri_body_.size(); }
+
+ private:
+  friend class GroundTruth;
+  friend Penetration measurePenetration(const std::vector<TruthBody>& bodies, TriangleGrid& grid);
+  bool cellRange(const Vec3& lo, const Vec3& hi, std::int64_t r[6]) const;
+  std::size_t cellIndex(std::int64_t x, std::int64_t y, std::int64_t z) const {
+    return static_cast<std::size_t>((z * dims_[1] + y) * dims_[0] + x);
+  }
+
+  const std::vector<TruthBody>* bodies_ = nullptr;
+  double cell_ = 1.0;
+  Vec3 origin_ = Vec3::Zero();
+  std::int64_t dims_[3] = {1, 1, 1};
+  std::vector<std::uint32_t> offsets_;  // CSR over cells
+  std::vector<std::uint32_t> items_;    // global triangle ids
+  std::vector<Index> tri_body_, tri_local_;
+  std::vector<Vec3> tri_lo_, tri_hi_;
+  std::vector<Vec3> body_lo_, body_hi_;  // bounds of each body's triangles
+  mutable std::vector<std::uint32_t> stamp_;
+  mutable std::uint32_t stamp_now_ = 0;
+  std::uint32_t nextStamp() const;
+};
+
+/// Computes the truth with the grid; keeps its buffers between calls.
+class GroundTruth {
+ public:
+  const TruthResult& compute(const std::vector<TruthBody>& bodies, const TruthSettings& settings);
+  const TriangleGrid& grid() const { return grid_; }
+
+ private:
+  TriangleGrid grid_;
+  TruthResult result_;
+};
+
+/// The reference: every vertex against every triangle of every other body.
+TruthResult groundTruthBruteForce(const std::vector<TruthBody>& bodies, const TruthSettings& settings);
+
+/// Vertices inside another closed body deeper than the strict radius (margin_A + margin_B): the
+/// user-visible failure. Inside = odd crossings along +x and along +y (two rays, so that a ray
+/// grazing an edge cannot fake an inside); depth = distance to that body's surface.
+struct Penetration {
+  double max_depth = 0.0;       ///< length units
+  std::size_t vertices = 0;     ///< (vertex, body) pairs found penetrating
+};
+Penetration measurePenetration(const std::vector<TruthBody>& bodies, TriangleGrid& grid);
+
+// --- template implementation ---
+template <class F>
+void TriangleGrid::forEachInBox(const Vec3& lo, const Vec3& hi, F&& f) const {
+  std::int64_t r[6];
+  if (!cellRange(lo, hi, r)) return;
+  const std::uint32_t s = nextStamp();
+  for (std::int64_t z = r[2]; z <= r[5]; ++z)
+    for (std::int64_t y = r[1]; y <= r[4]; ++y)
+      for (std::int64_t x = r[0]; x <= r[3]; ++x) {
+        const std::size_t c = cellIndex(x, y, z);
+        for (std::uint32_t k = offsets_[c]; k < offsets_[c + 1]; ++k) {
+          const std::uint32_t g = items_[k];
+          if (stamp_[g] == s) continue;
+          stamp_[g] = s;
+          const Vec3& tl = tri_lo_[g];
+          const Vec3& th = tri_hi_[g];
+          if (tl.x() > hi.x() || tl.y() > hi.y() || tl.z() > hi.z() || th.x() < lo.x() || th.y() < lo.y() ||
+              th.z() < lo.z())
+            continue;
+          f(tri_body_[g], tri_local_[g]);
+        }
+      }
+}
+
+}  // namespace psc::demo

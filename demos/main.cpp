@@ -1,0 +1,164 @@
+// psc_demo: soft-body scenes simulated with the particle sensors and with Bullet's default
+// soft-soft pipeline side by side, measured against an exact ground truth. Without arguments it
+// runs the default suite and writes results/ (see suite.h).
+#include "mesh_file.h"
+#include "psc/error.h"
+#include "scenes.h"
+#include "sensor_pipeline.h"
+#include "suite.h"
+
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <iostream>
+#include <sstream>
+
+using namespace psc::demo;
+
+namespace {
+
+std::vector<std::size_t> parseValues(const std::vector<std::string>& tokens) {
+  std::vector<std::size_t> values;
+  for (const std::string& token : tokens) {
+    std::stringstream in(token);
+    for (std::string item; std::getline(in, item, ',');) {
+      if (item.empty()) continue;
+      std::size_t pos = 0;
+      unsigned long long v = 0;
+      try {
+        v = std::stoull(item, &pos);
+      } catch (const std::exception&) {
+        pos = 0;
+      }
+      if (pos != item.size() || v == 0) throw psc::Error(psc::ErrorCode::InvalidArgument, "--sweep: '" + item + "' is not a positive whole number");
+      values.push_back(static_cast<std::size_t>(v));
+    }
+  }
+  return values;
+}
+
+void listScenes() {
+  std::printf("%-4s %-12s %-7s %-6s %s\n", "#", "name", "bodies", "steps", "what");
+  for (const SceneInfo& s : sceneCatalog())
+    std::printf("%-4s %-12s %-7s %-6zu %s\n", s.number.c_str(), s.name.c_str(),
+                (s.takes_body_count ? std::to_string(s.default_bodies) + "*" : std::to_string(s.default_bodies)).c_str(),
+                s.default_steps, s.summary.c_str());
+  std::printf("(* = --bodies applies)\n");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc == 1) {
+    std::cerr << "psc_demo: no arguments: running the default suite (every scene, both pipelines, both ground truths; "
+                 "results/ gets demo.json, demo.csv and plots/). psc_demo --help lists the options.\n";
+    return runSuite(defaultSuite(), defaultSuiteOptions(), std::cout, std::cerr);
+  }
+
+  CLI::App app{"psc_demo: particle-sensor soft-soft collision vs Bullet's VF_SS default, side by side.\n"
+               "Without arguments: the default suite, writing results/."};
+  std::vector<std::string> scenes;
+  SceneParams params;
+  std::size_t steps = 0, warmup = 0, frame_every = 1;
+  std::string pipeline = "both", truth = "both", json, csv, frames, plot_dir;
+  std::vector<std::string> sweep;
+  bool list = false, no_penetration = false;
+  app.add_option("--scene", scenes, "scene name or number, repeatable, or 'all' (default: all; see --list-scenes)");
+  app.add_option("--resolution", params.resolution, "vertices per body (default 1000)")->check(CLI::Range(14, 10000000));
+  app.add_option("--bodies", params.bodies, "body count, for scenes that take one (default: the scene's)")
+      ->check(CLI::Range(1, 100000));
+  app.add_option("--steps", steps, "simulation steps (default: the scene's)")->check(CLI::Range(1, 10000000));
+  app.add_option("--seed", params.seed, "placement seed (default 1)");
+  app.add_option("--pipeline", pipeline, "sensors, bullet or both (default both)")
+      ->check(CLI::IsMember({"sensors", "bullet", "both"}));
+  app.add_option("--truth", truth, "ground truth: none, strict, full or both (default both)")
+      ->check(CLI::IsMember({"none", "strict", "full", "both"}));
+  app.add_option("--mesh", params.mesh_file, "OBJ/OFF/PLY/STL file for scene 8 ('mesh'); alone it selects scene 8");
+  app.add_option("--sweep", sweep, "resolution|bodies followed by values, e.g. --sweep resolution 500,1000,2000")
+      ->expected(2, 1000);
+  app.add_option("--json", json, "write results as JSON");
+  app.add_option("--csv", csv, "write results as CSV");
+  app.add_option("--frames", frames, "write a VTK series per run into DIR (open the .pvd in ParaView)");
+  app.add_option("--frame-every", frame_every, "with --frames: every n-th step (default 1)")->check(CLI::Range(1, 1000000));
+  app.add_option("--plot", plot_dir, "write PNG plots into DIR (needs gnuplot)");
+  app.add_option("--warmup", warmup, "steps left out of the timing medians (default min(10, steps/10))");
+  app.add_flag("--no-penetration", no_penetration, "skip the inside tests after each step");
+  app.add_flag("--list-scenes", list, "list the scenes and exit");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  if (list) {
+    listScenes();
+    return 0;
+  }
+
+  try {
+    if (!params.mesh_file.empty()) {
+      // Read it once up front: a bad file is reported before anything runs.
+      MeshFileInfo info;
+      const psc::TriMesh mesh = loadMeshFile(params.mesh_file, &info);
+      std::cerr << "psc_demo: " << params.mesh_file << ": " << mesh.vertices.size() << " vertices, "
+                << mesh.triangles.size() << " triangles from " << info.meshes << " mesh(es)\n";
+      if (scenes.empty()) scenes.push_back("mesh");
+    }
+    if (scenes.empty() || std::find(scenes.begin(), scenes.end(), "all") != scenes.end()) {
+      scenes.clear();
+      for (const SceneInfo& s : sceneCatalog()) scenes.push_back(s.name);
+    }
+    for (const std::string& s : scenes)
+      if (!findScene(s)) makeScene(s, params);  // throws the "unknown scene" message with the list
+
+    SuiteOptions options;
+    options.pipelines.clear();
+    if (pipeline != "bullet") options.pipelines.push_back(Pipeline::Sensors);
+    if (pipeline != "sensors") options.pipelines.push_back(Pipeline::Bullet);
+    if (pipeline == "sensors" && !SensorPipeline::available())
+      throw psc::Error(psc::ErrorCode::InvalidArgument, "this psc_demo was built without psc::bullet: use --pipeline bullet");
+    if (!SensorPipeline::available() && pipeline == "both") {
+      std::cerr << "psc_demo: warning: built without psc::bullet, running the Bullet pipeline only\n";
+      options.pipelines = {Pipeline::Bullet};
+    }
+    options.run.truth = truth == "none"     ? TruthMode::None
+                        : truth == "strict" ? TruthMode::Strict
+                        : truth == "full"   ? TruthMode::Full
+                                            : TruthMode::Both;
+    options.run.penetration = !no_penetration;
+    options.run.frames_dir = frames;
+    options.run.frame_every = frame_every;
+    options.run.warmup = warmup;
+    options.json = json;
+    options.csv = csv;
+    options.plot_dir = plot_dir;
+
+    std::vector<Job> jobs;
+    if (sweep.empty()) {
+      for (const std::string& s : scenes) jobs.push_back({s, params, steps, "scenes"});
+    } else {
+      const std::string kind = sweep.front();
+      if (kind != "resolution" && kind != "bodies")
+        throw psc::Error(psc::ErrorCode::InvalidArgument, "--sweep: '" + kind + "' is neither 'resolution' nor 'bodies'");
+      const std::vector<std::size_t> values = parseValues({sweep.begin() + 1, sweep.end()});
+      if (values.empty()) throw psc::Error(psc::ErrorCode::InvalidArgument, "--sweep " + kind + ": no values given");
+      for (const std::string& s : scenes) {
+        const SceneInfo* info = findScene(s);
+        if (kind == "bodies" && !info->takes_body_count)
+          throw psc::Error(psc::ErrorCode::InvalidArgument,
+                           "--sweep bodies: scene '" + info->name + "' has a fixed body count (scenes that take one: "
+                           "tori_pile, mixed_pile, mesh)");
+        for (std::size_t v : values) {
+          Job j{s, params, steps, "sweep_" + kind};
+          (kind == "resolution" ? j.params.resolution : j.params.bodies) = v;
+          if (kind == "resolution" && v < 14)
+            throw psc::Error(psc::ErrorCode::InvalidArgument, "--sweep resolution: " + std::to_string(v) + " is below 14");
+          jobs.push_back(j);
+        }
+      }
+    }
+    return runSuite(jobs, options, std::cout, std::cerr);
+  } catch (const std::exception& e) {
+    std::cerr << "psc_demo: error: " << e.what() << "\n";
+    return 2;
+  }
+}

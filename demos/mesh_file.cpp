@@ -1,0 +1,214 @@
+#include "mesh_file.h"
+
+#include "psc/error.h"
+
+#include <assimp/Importer.hpp>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <map>
+#include <new>
+#include <unordered_map>
+
+namespace psc::demo {
+namespace {
+
+Error fileError(const std::string& path, const std::string& what) {
+  return Error(ErrorCode::FileError, "mesh file '" + path + "': " + what);
+}
+
+struct PositionKey {
+  float x, y, z;
+  bool operator==(const PositionKey& o) const { return x == o.x && y == o.y && z == o.z; }
+};
+struct PositionKeyHash {
+  std::size_t operator()(const PositionKey& k) const {
+    std::uint32_t b[3];
+    std::memcpy(b, &k, sizeof b);
+    std::uint64_t h = 1469598103934665603ull;
+    for (std::uint32_t v : b) h = (h ^ v) * 1099511628211ull;
+    return static_cast<std::size_t>(h);
+  }
+};
+
+void collect(const aiScene* scene, TriMesh& out, MeshFileInfo& info, const std::string& path) {
+  // Welding by exact position, not by assimp's JoinIdenticalVertices alone: that one keeps apart
+  // vertices that differ only in normal or UV (hard edges), which would cut the soft body open.
+  std::unordered_map<PositionKey, Index, PositionKeyHash> index_of;
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    const aiMesh* mesh = scene->mMeshes[m];
+    if (!mesh || !(mesh->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) continue;
+    ++info.meshes;
+    info.vertices_in_file += mesh->mNumVertices;
+    std::vector<Index> remap(mesh->mNumVertices);
+    for (unsigned v = 0; v < mesh->mNumVertices; ++v) {
+      const aiVector3D& p = mesh->mVertices[v];
+      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+        throw fileError(path, "vertex " + std::to_string(v) + " of mesh " + std::to_string(m) +
+                                  " has a non-finite coordinate");
+      const auto [it, inserted] = index_of.emplace(PositionKey{p.x, p.y, p.z}, static_cast<Index>(out.vertices.size()));
+      if (inserted) out.vertices.emplace_back(p.x, p.y, p.z);
+      remap[v] = it->second;
+    }
+    for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
+      const aiFace& face = mesh->mFaces[f];
+      if (face.mNumIndices != 3) continue;  // points and lines left by SortByPType
+      Triangle t{};
+      for (int k = 0; k < 3; ++k) {
+        if (face.mIndices[k] >= mesh->mNumVertices)
+          throw fileError(path, "face " + std::to_string(f) + " of mesh " + std::to_string(m) +
+                                    " uses vertex " + std::to_string(face.mIndices[k]) + " of " +
+                                    std::to_string(mesh->mNumVertices));
+        t[static_cast<std::size_t>(k)] = remap[face.mIndices[k]];
+      }
+      if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) {
+        ++info.triangles_dropped;
+        continue;
+      }
+      out.triangles.push_back(t);
+    }
+  }
+}
+
+/// Element counts in OFF and PLY headers must fit the file: every element takes at least one
+/// byte. Without this check assimp believes a header that claims 353,535,235,358 vertices
+/// (assimp-testmodels' OutOfMemory.off) and spends a minute and gigabytes before giving up.
+void checkDeclaredCounts(const std::string& path, std::uintmax_t size) {
+  std::ifstream in(path, std::ios::binary);
+  std::string head(4096, '\0');
+  in.read(head.data(), static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<std::size_t>(in.gcount()));
+  std::istringstream text(head);
+  std::string first;
+  text >> first;
+  const auto tooMany = [&](const std::string& what, const std::string& token) {
+    // Counts too large for any integer type are absurd as well.
+    std::size_t used = 0;
+    unsigned long long n = 0;
+    try {
+      n = std::stoull(token, &used);
+    } catch (const std::exception&) {
+      return;  // not a number: leave the diagnosis to assimp
+    }
+    if (used == token.size() && n > size)
+      throw fileError(path, "the header claims " + token + " " + what + " but the file has only " +
+                                std::to_string(size) + " bytes");
+  };
+  if (first.size() >= 3 && first.compare(first.size() - 3, 3, "OFF") == 0) {
+    std::string nv, nf;
+    if (text >> nv >> nf) {
+      tooMany("vertices", nv);
+      tooMany("faces", nf);
+    }
+  } else if (first == "ply") {
+    for (std::string line; std::getline(text, line) && line.rfind("end_header", 0) != 0;) {
+      std::istringstream words(line);
+      std::string keyword, name, count;
+      if (words >> keyword >> name >> count && keyword == "element") tooMany(name + " elements", count);
+    }
+  }
+}
+
+}  // namespace
+
+TriMesh loadMeshFile(const std::string& path, MeshFileInfo* info_out) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw fileError(path, "no such file");
+  if (!std::filesystem::is_regular_file(path, ec)) throw fileError(path, "not a regular file");
+  const std::uintmax_t size = std::filesystem::file_size(path, ec);
+  if (ec) throw fileError(path, "cannot read its size: " + ec.message());
+  if (size == 0) throw fileError(path, "the file is empty");
+  checkDeclaredCounts(path, size);
+
+  Assimp::Importer importer;
+  // Lines and points are split off so that only triangles remain in the meshes we read.
+  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
+  const unsigned flags = aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
+                         aiProcess_SortByPType | aiProcess_ValidateDataStructure;
+  const aiScene* scene = nullptr;
+  try {
+    scene = importer.ReadFile(path, flags);
+  } catch (const std::bad_alloc&) {
+    throw fileError(path, "the file asks for more memory than is available (corrupt counts?)");
+  } catch (const std::exception& e) {
+    throw fileError(path, std::string("the reader failed: ") + e.what());
+  }
+  if (!scene) {
+    const std::string why = importer.GetErrorString();
+    throw fileError(path, why.empty() ? "assimp could not read it" : "assimp could not read it: " + why);
+  }
+  if (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE) throw fileError(path, "the file is incomplete (no usable meshes)");
+
+  TriMesh out;
+  MeshFileInfo info;
+  collect(scene, out, info, path);
+  if (out.triangles.empty()) throw fileError(path, "the file holds no triangles (points or lines only, or empty)");
+  // Vertices that no triangle uses would be unreachable for the sensors: drop them.
+  std::vector<Index> used(out.vertices.size(), kInvalidIndex);
+  TriMesh compact;
+  for (Triangle& t : out.triangles)
+    for (Index& v : t) {
+      if (used[v] == kInvalidIndex) {
+        used[v] = static_cast<Index>(compact.vertices.size());
+        compact.vertices.push_back(out.vertices[v]);
+      }
+      v = used[v];
+    }
+  compact.triangles = std::move(out.triangles);
+  if (info_out) *info_out = info;
+  return compact;
+}
+
+void normalizeMesh(TriMesh& mesh, double radius) {
+  if (mesh.vertices.empty()) return;
+  Vec3 lo = mesh.vertices[0], hi = mesh.vertices[0];
+  for (const Vec3& p : mesh.vertices) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  const Vec3 c = 0.5 * (lo + hi);
+  double r = 0.0;
+  for (const Vec3& p : mesh.vertices) r = std::max(r, (p - c).norm());
+  mesh.translate(-c);
+  if (r > 0.0) mesh.scale(radius / r);
+}
+
+std::size_t subdivideToward(TriMesh& mesh, std::size_t target) {
+  std::size_t done = 0;
+  for (;;) {
+    std::map<std::pair<Index, Index>, Index> midpoint;
+    for (const Triangle& t : mesh.triangles)
+      for (int k = 0; k < 3; ++k) {
+        Index a = t[static_cast<std::size_t>(k)], b = t[static_cast<std::size_t>((k + 1) % 3)];
+        midpoint.emplace(std::minmax(a, b), kInvalidIndex);
+      }
+    const std::size_t before = mesh.vertices.size();
+    const std::size_t after = before + midpoint.size();
+    const auto gap = [&](std::size_t n) { return n > target ? n - target : target - n; };
+    if (gap(after) >= gap(before)) return done;
+    for (auto& [edge, index] : midpoint) {
+      index = static_cast<Index>(mesh.vertices.size());
+      mesh.vertices.push_back(0.5 * (mesh.vertices[edge.first] + mesh.vertices[edge.second]));
+    }
+    std::vector<Triangle> split;
+    split.reserve(4 * mesh.triangles.size());
+    for (const Triangle& t : mesh.triangles) {
+      const Index ab = midpoint.at(std::minmax(t[0], t[1]));
+      const Index bc = midpoint.at(std::minmax(t[1], t[2]));
+      const Index ca = midpoint.at(std::minmax(t[2], t[0]));
+      split.push_back({t[0], ab, ca});
+      split.push_back({ab, t[1], bc});
+      split.push_back({ca, bc, t[2]});
+      split.push_back({ab, bc, ca});
+    }
+    mesh.triangles = std::move(split);
+    ++done;
+  }
+}
+
+}  // namespace psc::demo

@@ -1,0 +1,227 @@
+#include "report.h"
+
+#include "psc/error.h"
+
+#include <LinearMath/btScalar.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <ostream>
+#include <sstream>
+#include <thread>
+
+#ifndef PSC_BUILD_TYPE
+#define PSC_BUILD_TYPE "unknown"
+#endif
+
+namespace psc::demo {
+namespace {
+
+std::ofstream openOut(const std::string& path) {
+  const std::filesystem::path p(path);
+  std::error_code ec;
+  if (p.has_parent_path()) std::filesystem::create_directories(p.parent_path(), ec);
+  std::ofstream out(path);
+  if (!out) throw Error(ErrorCode::FileError, "cannot write '" + path + "'");
+  return out;
+}
+
+std::string fixed(double v, int digits) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+  return buf;
+}
+
+/// Keeps 3 significant digits for small times and whole numbers for large ones.
+std::string ms(double v) {
+  if (v >= 100) return fixed(v, 0);
+  if (v >= 10) return fixed(v, 1);
+  if (v >= 1) return fixed(v, 2);
+  return fixed(v, 3);
+}
+
+std::string count(double v) {
+  if (v >= 1e6) return fixed(v / 1e6, 2) + "M";
+  if (v >= 1e4) return fixed(v / 1e3, 1) + "k";
+  return fixed(v, 0);
+}
+
+}  // namespace
+
+MachineInfo machineInfo() {
+  MachineInfo m;
+  m.cores = std::thread::hardware_concurrency();
+  std::ifstream cpuinfo("/proc/cpuinfo");
+  for (std::string line; std::getline(cpuinfo, line);)
+    if (line.rfind("model name", 0) == 0) {
+      const auto colon = line.find(':');
+      if (colon != std::string::npos) m.cpu = line.substr(colon + 2);
+      break;
+    }
+#if defined(__clang__)
+  m.compiler = std::string("clang ") + __clang_version__;
+#elif defined(__GNUC__)
+  m.compiler = std::string("g++ ") + __VERSION__;
+#else
+  m.compiler = "unknown";
+#endif
+  m.build_type = PSC_BUILD_TYPE;
+  const int v = btGetVersion();
+  m.bullet_version = std::to_string(v / 100) + "." + (v % 100 < 10 ? "0" : "") + std::to_string(v % 100);
+  m.bullet_precision = sizeof(btScalar) == sizeof(double) ? "double" : "single";
+  const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
+  m.date = buf;
+  return m;
+}
+
+std::string machineLine(const MachineInfo& m) {
+  return m.date + ", " + std::to_string(m.cores) + " cores (" + (m.cpu.empty() ? "cpu unknown" : m.cpu) +
+         "), runs single-threaded, " + m.build_type + " build, " + m.compiler + ", Bullet " + m.bullet_version + " (" +
+         m.bullet_precision + " precision)";
+}
+
+const std::vector<std::string>& requiredRunKeys() {
+  static const std::vector<std::string> keys = {
+      "scene", "resolution", "bodies", "steps", "pipeline", "recall_strict", "recall_full",
+      "recall_strict_worst_step", "pair_recall", "contacts_outside_truth", "exact_tests_per_step",
+      "flagged_pairs_per_step", "particles", "collision_ms_median", "step_ms_median", "max_penetration",
+      "penetration_steps", "peak_rss_mb"};
+  return keys;
+}
+
+nlohmann::json toJson(const MachineInfo& m) {
+  return {{"cores", m.cores},           {"cpu", m.cpu},
+          {"compiler", m.compiler},     {"build_type", m.build_type},
+          {"bullet_version", m.bullet_version}, {"bullet_precision", m.bullet_precision},
+          {"threads", m.threads},       {"date", m.date}};
+}
+
+nlohmann::json toJson(const RunResult& r) {
+  nlohmann::json j = nlohmann::json::object();
+  j["scene"] = r.scene;
+  j["resolution"] = r.resolution;
+  j["bodies"] = r.bodies;
+  j["steps"] = r.steps;
+  j["pipeline"] = toString(r.pipeline);
+  if (r.has_strict) {
+    j["recall_strict"] = r.recall_strict;
+    j["recall_strict_worst_step"] = r.recall_strict_worst_step;
+  }
+  if (r.has_full) j["recall_full"] = r.recall_full;
+  if (r.has_strict || r.has_full) j["pair_recall"] = r.pair_recall;
+  if (r.has_full) j["contacts_outside_truth"] = r.contacts_outside_truth;
+  j["exact_tests_per_step"] = r.exact_tests_per_step;
+  if (r.has_sensor_figures) {
+    j["flagged_pairs_per_step"] = r.flagged_pairs_per_step;
+    j["particles"] = r.particles;
+  }
+  j["collision_ms_median"] = r.collision_ms_median;
+  j["step_ms_median"] = r.step_ms_median;
+  j["max_penetration"] = r.max_penetration;
+  j["penetration_steps"] = r.penetration_steps;
+  j["peak_rss_mb"] = r.peak_rss_mb;
+  // Beyond the required keys: the rest of BENCHMARK.md's figures and what explains them.
+  j["scene_number"] = r.scene_number;
+  j["series"] = r.series;
+  j["vertices"] = r.vertices;
+  if (r.has_full) j["recall_full_worst_step"] = r.recall_full_worst_step;
+  j["contacts_found"] = r.contacts_found_total;
+  if (r.has_strict) j["truth_strict_contacts"] = r.truth_strict_total;
+  if (r.has_full) j["truth_full_contacts"] = r.truth_full_total;
+  if (r.has_strict || r.has_full) j["truth_ambiguous_contacts"] = r.truth_ambiguous;
+  if (r.has_sensor_figures) {
+    j["rounds_per_step"] = r.rounds_per_step;
+    j["round_cap_hits"] = r.round_cap_hits;
+    j["repartitions"] = r.repartitions;
+    j["fallback_pairs"] = r.fallback_pairs;
+    if (!r.pipeline_error.empty()) j["pipeline_error"] = r.pipeline_error;
+  }
+  j["collision_ms_mean"] = r.collision_ms_mean;
+  j["step_ms_mean"] = r.step_ms_mean;
+  j["detect_ms_median"] = r.detect_ms_median;
+  j["face_refit_ms_median"] = r.face_refit_ms_median;
+  if (r.ratio_bullet_over_sensors > 0) j["ratio_bullet_over_sensors"] = r.ratio_bullet_over_sensors;
+  j["midphase_bytes_per_vertex"] = r.midphase_bytes_per_vertex;
+  j["wall_seconds"] = r.wall_seconds;
+  if (!r.note.empty()) j["note"] = r.note;
+  return j;
+}
+
+nlohmann::json toJson(const MachineInfo& machine, const std::vector<RunResult>& runs) {
+  nlohmann::json doc;
+  doc["machine"] = toJson(machine);
+  doc["runs"] = nlohmann::json::array();
+  for (const RunResult& r : runs) doc["runs"].push_back(toJson(r));
+  return doc;
+}
+
+void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
+  const char* head =
+      "%-12s %6s %4s %5s %-8s %15s %15s %6s %7s %8s %7s %8s %8s %6s %8s %5s %6s\n";
+  char line[512];
+  std::snprintf(line, sizeof line, head, "scene", "res", "bod", "steps", "pipeline", "strict all/wst",
+                "full all/wst", "pairs", "outside", "exact/st", "flag/st", "coll ms", "step ms", "B/ours", "max pen",
+                "pen n", "MB");
+  out << line;
+  for (const RunResult& r : runs) {
+    const std::string strict = r.has_strict ? fixed(r.recall_strict, 4) + "/" + fixed(r.recall_strict_worst_step, 3) : "-";
+    const std::string full = r.has_full ? fixed(r.recall_full, 4) + "/" + fixed(r.recall_full_worst_step, 3) : "-";
+    const std::string pairs = (r.has_strict || r.has_full) ? fixed(r.pair_recall, 3) : "-";
+    const std::string outside = r.has_full ? count(double(r.contacts_outside_truth)) : "-";
+    const std::string flagged = r.has_sensor_figures ? count(r.flagged_pairs_per_step) : "-";
+    const std::string ratio = r.ratio_bullet_over_sensors > 0 ? fixed(r.ratio_bullet_over_sensors, 2) : "";
+    std::snprintf(line, sizeof line, head, r.scene.c_str(), std::to_string(r.resolution).c_str(),
+                  std::to_string(r.bodies).c_str(), std::to_string(r.steps).c_str(), toString(r.pipeline), strict.c_str(),
+                  full.c_str(), pairs.c_str(), outside.c_str(), count(r.exact_tests_per_step).c_str(), flagged.c_str(),
+                  ms(r.collision_ms_median).c_str(), ms(r.step_ms_median).c_str(), ratio.c_str(),
+                  fixed(r.max_penetration, 3).c_str(), std::to_string(r.penetration_steps).c_str(),
+                  fixed(r.peak_rss_mb, 0).c_str());
+    out << line;
+  }
+}
+
+void writeJson(const std::string& path, const MachineInfo& machine, const std::vector<RunResult>& runs) {
+  std::ofstream out = openOut(path);
+  out << toJson(machine, runs).dump(2) << '\n';
+  if (!out) throw Error(ErrorCode::FileError, "writing '" + path + "' failed");
+}
+
+void writeCsv(const std::string& path, const std::vector<RunResult>& runs) {
+  std::ofstream out = openOut(path);
+  // Every key that any run has, required ones first; empty cells where a key does not apply.
+  std::vector<std::string> keys = requiredRunKeys();
+  std::vector<nlohmann::json> rows;
+  for (const RunResult& r : runs) {
+    rows.push_back(toJson(r));
+    for (const auto& item : rows.back().items())
+      if (std::find(keys.begin(), keys.end(), item.key()) == keys.end()) keys.push_back(item.key());
+  }
+  for (std::size_t k = 0; k < keys.size(); ++k) out << (k ? "," : "") << keys[k];
+  out << '\n';
+  for (const nlohmann::json& row : rows) {
+    for (std::size_t k = 0; k < keys.size(); ++k) {
+      if (k) out << ',';
+      if (!row.contains(keys[k])) continue;
+      const nlohmann::json& v = row[keys[k]];
+      if (v.is_string()) {
+        std::string s = v.get<std::string>();
+        std::string quoted = "\"";
+        for (char c : s) quoted += (c == '"' ? std::string("\"\"") : std::string(1, c));
+        out << quoted << '"';
+      } else {
+        out << v.dump();
+      }
+    }
+    out << '\n';
+  }
+  if (!out) throw Error(ErrorCode::FileError, "writing '" + path + "' failed");
+}
+
+}  // namespace psc::demo

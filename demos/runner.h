@@ -1,0 +1,92 @@
+// One run: a scene simulated for S steps by one pipeline, measured against the ground truth.
+//
+// Collision ms (one definition for both pipelines): the wall time a step spends finding soft-soft
+// contacts, excluding what both pipelines pay identically.
+//   bullet  = face-tree refit (split out of btSoftBody::predictMotion by TimedSoftBodySolver;
+//             the tree only exists because of VF_SS)
+//           + the BT_PROFILE zone "Deformable Collision" during collision detection
+//             (btSoftBody::defaultCollisionHandler: node-tree vs face-tree traversal + every
+//             CollideVF_SS exact test, both directions, all soft-soft pairs)
+//   sensors = the plugin's sensor step (body sync + SensorWorld::step(): particle movement,
+//             flagging, candidate sets) + its exact stage (CollideVF_SS on the candidates)
+//           + the face-tree refit if any body still had one (normally 0: no VF_SS)
+// Excluded from both: the node-tree refit in predictMotion (Bullet always does it; soft-rigid
+// uses that tree), broadphase, soft-rigid collision, the solvers.
+// Step ms: wall time of stepSimulation minus the time the measurement hooks took inside it.
+#pragma once
+
+#include "scenes.h"
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace psc::demo {
+
+enum class Pipeline { Sensors, Bullet };
+enum class TruthMode { None, Strict, Full, Both };
+
+const char* toString(Pipeline p);
+const char* toString(TruthMode t);
+
+struct RunOptions {
+  std::size_t steps = 0;         ///< 0 = the scene's default
+  TruthMode truth = TruthMode::Both;
+  bool penetration = true;       ///< inside tests after every step (closed bodies)
+  std::string frames_dir;        ///< write a VTK series here; empty = none
+  std::string frames_name;       ///< file stem of the series; empty = <scene>_<pipeline>
+  std::size_t frame_every = 1;   ///< write every n-th step
+  std::size_t warmup = 0;        ///< steps left out of the medians; 0 = min(10, max(1, steps/10))
+};
+
+/// Everything a run measured. Fields that do not apply are flagged by the has_* members.
+struct RunResult {
+  std::string scene, scene_number, title, note;
+  std::string series = "scenes";  ///< which group of runs: "scenes", "sweep_resolution", "sweep_bodies"
+  std::size_t resolution = 0, bodies = 0, steps = 0, vertices = 0;
+  Pipeline pipeline = Pipeline::Bullet;
+  bool has_strict = false, has_full = false;
+  double recall_strict = 1.0, recall_full = 1.0;
+  double recall_strict_worst_step = 1.0, recall_full_worst_step = 1.0;
+  double pair_recall = 1.0;
+  std::size_t truth_strict_total = 0, truth_full_total = 0, found_in_strict = 0, found_in_full = 0;
+  std::size_t truth_ambiguous = 0;         ///< pairs in the rounding band, not counted either way
+  std::size_t contacts_found_total = 0;
+  std::size_t contacts_outside_truth = 0;  ///< only with the full truth
+  std::size_t truth_pairs_total = 0, truth_pairs_found = 0;
+  double exact_tests_per_step = 0.0;
+  bool has_sensor_figures = false;
+  double flagged_pairs_per_step = 0.0;
+  double rounds_per_step = 0.0;
+  std::size_t particles = 0;
+  std::size_t round_cap_hits = 0;
+  std::size_t repartitions = 0;
+  std::size_t fallback_pairs = 0;
+  std::string pipeline_error;              ///< first error the plugin reported, if any
+  double collision_ms_median = 0.0, step_ms_median = 0.0;
+  double collision_ms_mean = 0.0, step_ms_mean = 0.0;
+  double detect_ms_median = 0.0;           ///< whole performDiscreteCollisionDetection (cross-check)
+  double face_refit_ms_median = 0.0;
+  double max_penetration = 0.0;
+  std::size_t penetration_steps = 0;
+  double peak_rss_mb = 0.0;
+  double midphase_bytes_per_vertex = 0.0;
+  double ratio_bullet_over_sensors = 0.0;  ///< collision ms, filled when both pipelines ran
+  double wall_seconds = 0.0;               ///< whole run incl. truth and output
+  double truth_seconds = 0.0;
+  std::vector<double> collision_ms_per_step, step_ms_per_step;
+};
+
+/// Builds the world for `pipeline` from `scene`, steps it and measures. Throws psc::Error when the
+/// pipeline is unavailable (no plugin built).
+RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& options);
+
+/// Peak resident set size of the process since the last reset, MB (VmHWM; getrusage fallback).
+double peakRssMb();
+/// Resets the peak to the current RSS where Linux allows it (/proc/self/clear_refs, "5").
+bool resetPeakRss();
+
+double median(std::vector<double> v);
+
+}  // namespace psc::demo

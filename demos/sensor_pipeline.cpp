@@ -1,0 +1,122 @@
+#include "sensor_pipeline.h"
+
+#include "psc/error.h"
+
+#ifdef PSC_DEMO_HAVE_PLUGIN
+#include "psc/bullet/bullet.h"
+#endif
+
+namespace psc::demo {
+
+#ifdef PSC_DEMO_HAVE_PLUGIN
+
+struct SensorPipeline::Impl {
+  // Built from install()'s result: psc::bullet::Plugin's inline default constructor does not
+  // compile outside the plugin (its Installation is incomplete here).
+  Impl(SceneWorld& w, psc::bullet::Plugin p) : world(&w), plugin(std::move(p)) {}
+  SceneWorld* world;
+  psc::bullet::Plugin plugin;
+  std::uint64_t last_sensor_steps = 0;
+};
+
+bool SensorPipeline::available() { return true; }
+
+int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
+
+SensorPipeline::SensorPipeline(SceneWorld& world) {
+  psc::bullet::Settings settings;
+  settings.opt_in = psc::bullet::OptIn::Explicit;
+  impl_ = std::make_shared<Impl>(world, psc::bullet::install(world.world(), settings));
+  for (btSoftBody* body : world.softBodies()) impl_->plugin.setEnabled(body, true);
+  // The world destroys its attachments before its bodies and itself: the plugin must go first.
+  world.attach(impl_);
+}
+
+SensorPipeline::~SensorPipeline() = default;
+
+SensorStepFigures SensorPipeline::takeStep() {
+  SensorStepFigures f;
+  const psc::bullet::Stats& s = impl_->plugin.stats();
+  f.fallback_pairs = s.fallback_pairs;
+  if (s.sensor_steps == impl_->last_sensor_steps) return f;  // no soft-soft pair this step
+  impl_->last_sensor_steps = s.sensor_steps;
+  f.stepped = true;
+  f.particles = s.particles;
+  f.rounds = s.rounds;
+  f.round_cap_hits = s.round_cap_hits;
+  f.flagged_pairs = s.flagged_pairs;
+  f.candidate_pairs = s.candidate_pairs;
+  f.exact_tests = s.exact_tests;
+  f.contacts = s.contacts;
+  f.repartitions = s.repartitions;
+  f.ms_sensor = s.ms_sensor_step;
+  f.ms_exact = s.ms_exact;
+  f.error = s.error.empty() ? s.skipped_reason : s.error;
+  return f;
+}
+
+double SensorPipeline::midphaseBytesPerVertex() const {
+  std::size_t bytes = 0, vertices = 0;
+  for (btSoftBody* body : impl_->world->softBodies()) {
+    vertices += static_cast<std::size_t>(body->m_nodes.size());
+    if (auto id = impl_->plugin.bodyId(body)) bytes += impl_->plugin.sensorWorld().memoryBytes(*id);
+  }
+  return vertices ? static_cast<double>(bytes) / static_cast<double>(vertices) : 0.0;
+}
+
+SensorView SensorPipeline::view() const {
+  SensorView v;
+  const auto& bodies = impl_->world->softBodies();
+  const psc::SensorWorld& sw = impl_->plugin.sensorWorld();
+  v.region_of.resize(bodies.size());
+  v.region_flagged.resize(bodies.size());
+  std::vector<std::pair<psc::BodyId, std::size_t>> index;  // sensor id -> scene body
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    const auto id = impl_->plugin.bodyId(bodies[i]);
+    if (!id) continue;
+    index.emplace_back(*id, i);
+    try {
+      const psc::Partition& p = sw.partition(*id);
+      v.region_of[i].assign(p.region_of.begin(), p.region_of.end());
+      v.region_flagged[i].assign(p.regionCount(), 0);
+    } catch (const psc::Error&) {
+      // not partitioned yet (no soft-soft pair dispatched so far)
+    }
+  }
+  const auto scene_body = [&](psc::BodyId id) -> long {
+    for (const auto& [sid, i] : index)
+      if (sid == id) return static_cast<long>(i);
+    return -1;
+  };
+  for (const psc::ParticleState& p : sw.particles()) {
+    const long i = scene_body(p.body);
+    if (i >= 0) v.particles.push_back({static_cast<std::size_t>(i), p.vertex, p.region});
+  }
+  const auto mark = [&](psc::BodyId id, Index region) {
+    const long i = scene_body(id);
+    if (i >= 0 && region < v.region_flagged[static_cast<std::size_t>(i)].size())
+      v.region_flagged[static_cast<std::size_t>(i)][region] = 1;
+  };
+  for (const psc::FlaggedPair& f : sw.lastResult().flagged) {
+    mark(f.body_a, f.region_a);
+    mark(f.body_b, f.region_b);
+  }
+  return v;
+}
+
+#else  // no plugin
+
+struct SensorPipeline::Impl {};
+bool SensorPipeline::available() { return false; }
+int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
+SensorPipeline::SensorPipeline(SceneWorld&) {
+  throw Error(ErrorCode::InvalidArgument, "this psc_demo was built without psc::bullet: use --pipeline bullet");
+}
+SensorPipeline::~SensorPipeline() = default;
+SensorStepFigures SensorPipeline::takeStep() { return {}; }
+double SensorPipeline::midphaseBytesPerVertex() const { return 0.0; }
+SensorView SensorPipeline::view() const { return {}; }
+
+#endif
+
+}  // namespace psc::demo

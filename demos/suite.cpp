@@ -1,0 +1,171 @@
+#include "suite.h"
+
+#include "plots.h"
+#include "psc/error.h"
+#include "report.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <ostream>
+
+namespace psc::demo {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::string duration(double seconds) {
+  char buf[32];
+  if (seconds < 60) {
+    std::snprintf(buf, sizeof buf, "%.0f s", std::max(1.0, seconds));
+  } else {
+    std::snprintf(buf, sizeof buf, "%d min %02d s", int(seconds) / 60, int(seconds) % 60);
+  }
+  return buf;
+}
+
+std::string fmt(const char* format, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, format, v);
+  return buf;
+}
+
+/// Cost units of a job: vertices × steps × pipelines. The seconds per unit are learnt from the
+/// jobs already run; the first guess is what a 2-core laptop-class machine measured.
+double units(const Scene& s, std::size_t steps, std::size_t pipelines) {
+  std::size_t v = 0;
+  for (const SoftBodySpec& b : s.bodies) v += b.mesh.vertices.size();
+  return double(v) * double(steps) * double(pipelines);
+}
+
+std::string summary(const RunResult& r) {
+  std::string s = std::string(toString(r.pipeline)) + ": " + fmt("%.3g", r.collision_ms_median) + " ms coll, " +
+                  fmt("%.3g", r.step_ms_median) + " ms step";
+  if (r.has_strict) s += ", strict " + fmt("%.4f", r.recall_strict);
+  if (r.has_full) s += ", full " + fmt("%.4f", r.recall_full);
+  if (r.penetration_steps) s += ", penetration " + fmt("%.3f", r.max_penetration);
+  return s;
+}
+
+}  // namespace
+
+std::vector<Job> defaultSuite() {
+  std::vector<Job> jobs;
+  for (const SceneInfo& info : sceneCatalog()) {
+    Job j;
+    j.scene = info.name;
+    j.params.resolution = 1000;
+    jobs.push_back(j);
+  }
+  for (std::size_t res : {500, 1000, 2000, 4000}) {
+    Job j;
+    j.scene = "tori_pile";
+    j.params.resolution = res;
+    j.params.bodies = 8;
+    j.steps = 60;
+    j.series = "sweep_resolution";
+    jobs.push_back(j);
+  }
+  return jobs;
+}
+
+SuiteOptions defaultSuiteOptions() {
+  SuiteOptions o;
+  o.json = "results/demo.json";
+  o.csv = "results/demo.csv";
+  o.plot_dir = "results/plots";
+  return o;
+}
+
+int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ostream& out, std::ostream& progress) {
+  const MachineInfo machine = machineInfo();
+  progress << "psc_demo: " << jobs.size() << " scene run(s) × " << options.pipelines.size() << " pipeline(s), truth "
+           << toString(options.run.truth) << "; " << machineLine(machine) << "\n";
+  std::vector<RunResult> results;
+  int status = 0;
+  double seconds_per_unit = 1.5e-6, done_units = 0, done_seconds = 0;
+  const auto suite_start = Clock::now();
+  for (std::size_t i = 0; i < jobs.size(); ++i) {
+    const Job& job = jobs[i];
+    const auto job_start = Clock::now();
+    try {
+      const Scene scene = makeScene(job.scene, job.params);
+      const std::size_t steps = job.steps ? job.steps : scene.default_steps;
+      const double u = units(scene, steps, options.pipelines.size());
+      double remaining = 0;
+      for (std::size_t k = i; k < jobs.size(); ++k) {
+        // Later jobs are estimated from their parameters alone (building their meshes would cost).
+        const std::size_t res = jobs[k].params.resolution;
+        const std::size_t bodies = jobs[k].params.bodies ? jobs[k].params.bodies : (findScene(jobs[k].scene)->default_bodies);
+        const std::size_t st = jobs[k].steps ? jobs[k].steps : findScene(jobs[k].scene)->default_steps;
+        remaining += double(res * bodies * st * options.pipelines.size());
+      }
+      progress << "[" << i + 1 << "/" << jobs.size() << "] " << scene.name << " (scene " << findScene(scene.name)->number
+               << "): " << scene.bodies.size() << " bodies x " << scene.resolution() << " vertices, " << steps
+               << " steps ... est. " << duration(u * seconds_per_unit) << " (suite left ~"
+               << duration(remaining * seconds_per_unit) << ")\n";
+      if (!scene.note.empty()) progress << "      " << scene.note << "\n";
+      progress.flush();
+      std::vector<RunResult> pair;
+      for (Pipeline p : options.pipelines) {
+        RunOptions ro = options.run;
+        ro.steps = steps;
+        if (!ro.frames_dir.empty())
+          ro.frames_name = scene.name + "_" + std::to_string(scene.resolution()) + "v_" +
+                           std::to_string(scene.bodies.size()) + "b_" + toString(p);
+        RunResult r = runPipeline(scene, p, ro);
+        r.series = job.series;
+        progress << "      " << summary(r) << "\n";
+        progress.flush();
+        pair.push_back(std::move(r));
+      }
+      const RunResult* s = nullptr;
+      const RunResult* b = nullptr;
+      for (const RunResult& r : pair) (r.pipeline == Pipeline::Sensors ? s : b) = &r;
+      if (s && b && s->collision_ms_median > 0) {
+        const double ratio = b->collision_ms_median / s->collision_ms_median;
+        for (RunResult& r : pair) r.ratio_bullet_over_sensors = ratio;
+      }
+      for (RunResult& r : pair) results.push_back(std::move(r));
+      const double took = std::chrono::duration<double>(Clock::now() - job_start).count();
+      done_units += u;
+      done_seconds += took;
+      seconds_per_unit = done_seconds / done_units;
+      progress << "      done in " << duration(took) << "\n";
+    } catch (const std::exception& e) {
+      progress << "      FAILED: " << e.what() << "\n";
+      status = 1;
+    }
+  }
+  const double total = std::chrono::duration<double>(Clock::now() - suite_start).count();
+
+  out << "\n" << machineLine(machine) << "\n";
+  out << "recall: found ∩ truth / truth over all steps, then the worst step; pairs: body pairs in contact that got a "
+         "contact;\ncoll ms: soft-soft collision time per step (median after warm-up); B/ours: Bullet's coll ms over the "
+         "sensors'; max pen: deepest vertex inside another closed body beyond the margins\n\n";
+  printTable(out, results);
+  out << "\nsuite time " << duration(total) << "\n";
+  try {
+    if (!options.json.empty()) {
+      writeJson(options.json, machine, results);
+      out << "wrote " << options.json << "\n";
+    }
+    if (!options.csv.empty()) {
+      writeCsv(options.csv, results);
+      out << "wrote " << options.csv << "\n";
+    }
+    if (!options.plot_dir.empty()) {
+      if (!gnuplotAvailable())
+        progress << "warning: gnuplot not found, no PNG plots (data and scripts written to " << options.plot_dir << ")\n";
+      for (const std::string& png : writePlots(results, options.plot_dir)) out << "wrote " << png << "\n";
+    }
+    if (!options.run.frames_dir.empty())
+      out << "frames in " << options.run.frames_dir << " (open the *_surface.pvd files in ParaView)\n";
+  } catch (const std::exception& e) {
+    progress << "error: " << e.what() << "\n";
+    status = 1;
+  }
+  return status;
+}
+
+}  // namespace psc::demo

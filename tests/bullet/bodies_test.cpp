@@ -1,0 +1,159 @@
+// Soft bodies come and go, reallocate their nodes, change their node count and opt in or out while
+// the plugin is installed; the plugin follows without dangling pointers (run it under
+// PSC_SANITIZE=1 scripts/test to have AddressSanitizer check that too).
+#include "contact_check.h"
+#include "ground_truth.h"
+#include "psc/bullet/bullet.h"
+#include "soft_world.h"
+
+#include <BulletSoftBody/btSoftBodyHelpers.h>
+#include <gtest/gtest.h>
+
+namespace {
+
+using psc_test::SoftParams;
+using psc_test::SoftWorld;
+
+/// Every contact of the step is Bullet's own and every strict-radius contact was found.
+void expectExactAndComplete(SoftWorld& w, const psc::bullet::Plugin& plugin, std::size_t& strict_truth) {
+  const auto& bodies = w.world.getSoftBodyArray();
+  const psc_test::ContactAudit audit = psc_test::auditContacts(bodies);
+  EXPECT_TRUE(audit.clean()) << audit.first_problem;
+  const psc_test::GroundTruth truth = psc_test::bruteForceContacts(bodies);
+  psc_test::RecallMeter meter;
+  meter.add(truth, psc_test::foundContacts(bodies));
+  EXPECT_EQ(meter.missedStrict(), 0u);
+  strict_truth += truth.strict.size();
+  EXPECT_TRUE(plugin.stats().error.empty()) << plugin.stats().error;
+}
+
+TEST(Bodies, RemovingAndAddingBodiesMidSimulation) {
+  SoftWorld w;
+  w.addBox({3, 0.5, 3}, 0, {0, -0.5, 0});
+  SoftParams p;
+  btSoftBody* left = w.addSoft(psc::makeSphere(0.4, 200).translate({-0.81, 0.42, 0}), p);
+  btSoftBody* middle = w.addSoft(psc::makeSphere(0.4, 200).translate({0, 0.42, 0}), p);
+  btSoftBody* right = w.addSoft(psc::makeSphere(0.4, 200).translate({0.81, 0.42, 0}), p);
+  auto plugin = psc::bullet::install(w.world);
+  std::size_t strict = 0;
+  w.run(20, [&] { expectExactAndComplete(w, plugin, strict); });
+  EXPECT_EQ(plugin.stats().bodies, 3u);
+  ASSERT_TRUE(plugin.bodyId(middle).has_value());
+  const psc::BodyId middle_id = *plugin.bodyId(middle);
+
+  w.destroySoft(middle);  // removed and freed between two steps
+  w.run(20, [&] { expectExactAndComplete(w, plugin, strict); });
+  EXPECT_EQ(plugin.stats().bodies, 2u);
+  EXPECT_FALSE(plugin.sensorWorld().hasBody(middle_id));
+
+  // A new body (possibly at the freed address) dropped onto the left ball.
+  btSoftBody* fresh = w.addSoft(psc::makeSphere(0.3, 150).translate({-0.81, 1.2, 0}), p);
+  w.run(60, [&] { expectExactAndComplete(w, plugin, strict); });
+  EXPECT_EQ(plugin.stats().bodies, 3u);
+  ASSERT_TRUE(plugin.bodyId(fresh).has_value());
+  EXPECT_NE(*plugin.bodyId(fresh), middle_id);
+  // It lands on the left ball instead of passing through it (which would leave it at floor level,
+  // its centroid below the left ball's).
+  EXPECT_GT(double(psc_test::centroid(*fresh).y() - psc_test::centroid(*left).y()), 0.2);
+  EXPECT_GT(strict, 100u);
+  (void)right;
+}
+
+TEST(Bodies, NodeReallocationAndNodeCountChangesAreFollowed) {
+  SoftWorld w(0);
+  psc_test::buildScene(psc_test::Scene::HeadOn, w);
+  btSoftBody* a = w.world.getSoftBodyArray()[0];
+  auto plugin = psc::bullet::install(w.world);
+  std::size_t strict = 0;
+  w.run(12, [&] { expectExactAndComplete(w, plugin, strict); });
+  ASSERT_GT(strict, 0u);
+
+  // Same node count, new buffer: the sensor world must read the new memory.
+  const void* before = &a->m_nodes[0];
+  a->pointersToIndices();
+  a->m_nodes.reserve(a->m_nodes.capacity() * 2 + 1);
+  a->indicesToPointers();
+  ASSERT_NE(static_cast<const void*>(&a->m_nodes[0]), before);
+  w.run(8, [&] { expectExactAndComplete(w, plugin, strict); });
+
+  // One more node (Bullet reallocates m_nodes itself when full): the mesh is rebuilt.
+  const int nodes = a->m_nodes.size();
+  a->appendNode(a->m_nodes[0].m_x, 0.01f);
+  ASSERT_EQ(a->m_nodes.size(), nodes + 1);
+  w.run(8, [&] { expectExactAndComplete(w, plugin, strict); });
+  EXPECT_EQ(plugin.sensorWorld().topology(*plugin.bodyId(a)).vertexCount(), std::size_t(nodes + 1));
+}
+
+TEST(Bodies, OptInFollowsVfSsByDefaultAndSetEnabledOverrides) {
+  SoftWorld w(0);
+  SoftParams p;
+  p.vf_ss = false;  // Bullet's default: no soft-soft collision at all
+  btSoftBody* a = w.addSoft(psc::makeSphere(0.5, 200).translate({-0.52, 0, 0}), p, {1, 0, 0});
+  btSoftBody* b = w.addSoft(psc::makeSphere(0.5, 200).translate({0.52, 0, 0}), p, {-1, 0, 0});
+  auto plugin = psc::bullet::install(w.world);
+  w.run(2);
+  EXPECT_FALSE(plugin.participates(a));
+  EXPECT_EQ(plugin.stats().bodies, 0u);
+  EXPECT_EQ(plugin.stats().contacts, 0u);
+  EXPECT_EQ(plugin.stats().fallback_pairs, 1u);
+
+  plugin.setEnabled(a, true);
+  plugin.setEnabled(b, true);
+  w.run(1);
+  EXPECT_TRUE(plugin.participates(a));
+  EXPECT_EQ(plugin.stats().bodies, 2u);
+  EXPECT_GT(plugin.stats().contacts, 0u);
+
+  plugin.clearEnabled(b);
+  w.run(1);
+  EXPECT_EQ(plugin.stats().bodies, 1u);
+  EXPECT_EQ(plugin.stats().contacts, 0u);
+
+  // VF_SS switches a body in under the default rule; setEnabled(false) still wins, and the pair
+  // then goes to Bullet's own algorithm (which needs VF_SS on both: it collides them).
+  b->m_cfg.collisions |= btSoftBody::fCollision::VF_SS;
+  a->m_cfg.collisions |= btSoftBody::fCollision::VF_SS;
+  plugin.clearEnabled(a);
+  w.run(1);
+  EXPECT_EQ(plugin.stats().bodies, 2u);
+  plugin.setEnabled(a, false);
+  w.run(1);
+  EXPECT_EQ(plugin.stats().bodies, 1u);
+  EXPECT_EQ(plugin.stats().fallback_pairs, 1u);
+}
+
+TEST(Bodies, ExplicitOptInIgnoresVfSs) {
+  SoftWorld w(0);
+  btSoftBody* a = w.addSoft(psc::makeSphere(0.5, 200).translate({-0.52, 0, 0}), {}, {1, 0, 0});
+  btSoftBody* b = w.addSoft(psc::makeSphere(0.5, 200).translate({0.52, 0, 0}), {}, {-1, 0, 0});
+  psc::bullet::Settings settings;
+  settings.opt_in = psc::bullet::OptIn::Explicit;
+  auto plugin = psc::bullet::install(w.world, settings);
+  w.run(1);
+  EXPECT_EQ(plugin.stats().bodies, 0u);
+  plugin.setEnabled(a, true);
+  plugin.setEnabled(b, true);
+  w.run(1);
+  EXPECT_EQ(plugin.stats().bodies, 2u);
+  EXPECT_GT(plugin.stats().contacts, 0u);
+}
+
+TEST(Bodies, ABodyWithoutFacesIsSkippedNotFatal) {
+  SoftWorld w(0);
+  btSoftBody* ball = w.addSoft(psc::makeSphere(0.5, 200), {});
+  btSoftBody* rope = btSoftBodyHelpers::CreateRope(w.world.getWorldInfo(), btVector3(-1, 0, 0), btVector3(1, 0, 0), 16, 0);
+  rope->m_cfg.collisions |= btSoftBody::fCollision::VF_SS;
+  w.world.addSoftBody(rope);
+  auto plugin = psc::bullet::install(w.world);
+  w.run(3);
+  EXPECT_EQ(plugin.stats().bodies, 1u);
+  EXPECT_EQ(plugin.stats().skipped_bodies, 1u);
+  EXPECT_NE(plugin.stats().skipped_reason.find("no faces"), std::string::npos) << plugin.stats().skipped_reason;
+  EXPECT_TRUE(plugin.stats().error.empty());
+  EXPECT_GE(plugin.stats().fallback_pairs, 1u);
+  w.world.removeSoftBody(rope);
+  delete rope;
+  (void)ball;
+}
+
+}  // namespace
