@@ -14,6 +14,17 @@ namespace {
 
 btDbvtNode* newNode() { return new (btAlignedAlloc(sizeof(btDbvtNode), 16)) btDbvtNode(); }
 
+// Frees a (partial) tree built with newNode(), leaves included.
+void freeTree(btDbvtNode* n) {
+  if (!n) return;
+  if (!n->isleaf()) {
+    freeTree(n->childs[0]);
+    freeTree(n->childs[1]);
+  }
+  n->~btDbvtNode();
+  btAlignedFree(n);
+}
+
 /// Bullet 3.24's buildTreeBottomUp (btSoftBody.cpp), with the per-level adjacency computed from
 /// the children's lists instead of an all-pairs loop. Level-0 lists are used in the order given
 /// (the pairing takes the first unmarked neighbour); Bullet's higher levels come out sorted and
@@ -48,11 +59,13 @@ btDbvtNode* buildBottomUp(std::vector<btDbvtNode*> leaves, std::vector<std::vect
       }
       marked[i] = 1;
     }
-    if (next.size() == n)
+    if (next.size() == n) {
+      for (btDbvtNode* root : next) freeTree(root);  // nothing of the partial forest is kept
       throw Error(ErrorCode::InvalidMesh,
                   std::string("the body's ") + what +
                       " are in several unconnected pieces: Bullet 3.24's VF_SS tree builder would never finish "
                       "(btSoftBody::initializeFaceTree loops forever); keep one connected piece per soft body");
+    }
     std::vector<int> parent(n);
     for (std::size_t k = 0; k < children.size(); ++k) {
       parent[static_cast<std::size_t>(children[k].first)] = static_cast<int>(k);
@@ -152,9 +165,9 @@ void initializeVFTrees(btSoftBody& b) {
   try {
     b.m_fdbvt.m_root = buildBottomUp(std::move(leaves), std::move(adj), "triangles (through shared edges)");
   } catch (...) {
-    // The leaves were merged into partial trees; Bullet's clear() frees whatever hangs off m_root,
-    // so there is nothing consistent to keep: leave the body without a face tree.
+    // buildBottomUp freed the partial trees, leaves included: leave the body without a face tree.
     b.m_fdbvt.m_root = nullptr;
+    for (int i = 0; i < nf; ++i) b.m_faces[i].m_leaf = nullptr;
     throw;
   }
   delete b.m_fdbvnt;

@@ -92,7 +92,9 @@ void refitBounds(Body& b) {
                                                 ch.vertices.row(c), sum);
     if (!same_type)
       for (Index v : ch.vertices.row(c)) box.motion = std::max(box.motion, b.vertexMotion(v));
-    finite = finite && std::isfinite(sum);
+    // Finite but beyond kMaxCoordinate (a blown-up simulation) is rejected like NaN.
+    finite = finite && std::isfinite(sum) && box.lo.cwiseAbs().maxCoeff() <= kMaxCoordinate &&
+             box.hi.cwiseAbs().maxCoeff() <= kMaxCoordinate;
     b.chunk_box[c] = box;
   }
   if (!finite) {

@@ -133,6 +133,12 @@ Proxy decimate(const MeshTopology& topology, const PositionView& positions, std:
 std::vector<Index> hacdLabels(const Proxy& proxy, const DecompositionSettings& settings) {
   std::vector<Index> label(proxy.points.size(), kInvalidIndex);
   if (proxy.triangles.empty()) return label;
+  // Fewer than 4 triangles cannot enclose anything: one part, without HACD's hull code.
+  if (proxy.triangles.size() < 4) {
+    for (const Triangle& t : proxy.triangles)
+      for (Index v : t) label[v] = 0;
+    return label;
+  }
   // HACD normalises the points it is given in place, hence the copy.
   std::vector<HACD::Vec3<HACD::Real>> points;
   points.reserve(proxy.points.size());
@@ -320,9 +326,26 @@ ConvexParts decomposeConvex(const MeshTopology& topology, const PositionView& po
   std::vector<Index> proxy_label;
   Proxy proxy;
   if (diagonal > 0.0) {
-    proxy = topology.triangleCount() <= settings.max_input_triangles
-                ? buildProxy(topology, positions, [](std::size_t v) { return std::uint64_t(v); })
-                : decimate(topology, positions, settings.max_input_triangles);
+    if (topology.triangleCount() <= settings.max_input_triangles) {
+      // Vertices at exactly the same position become one proxy vertex: HACD's hull code crashes
+      // (double free) on coincident points, which the fuzzer found through duplicate vertices.
+      std::vector<Index> order(m);
+      for (std::size_t v = 0; v < m; ++v) order[v] = static_cast<Index>(v);
+      std::sort(order.begin(), order.end(), [&](Index a, Index b) {
+        const Vec3 pa = positions[a], pb = positions[b];
+        if (pa.x() != pb.x()) return pa.x() < pb.x();
+        if (pa.y() != pb.y()) return pa.y() < pb.y();
+        if (pa.z() != pb.z()) return pa.z() < pb.z();
+        return a < b;
+      });
+      std::vector<Index> representative(m);
+      for (std::size_t k = 0; k < m; ++k)
+        representative[order[k]] =
+            k > 0 && positions[order[k]] == positions[order[k - 1]] ? representative[order[k - 1]] : order[k];
+      proxy = buildProxy(topology, positions, [&](std::size_t v) { return std::uint64_t(representative[v]); });
+    } else {
+      proxy = decimate(topology, positions, settings.max_input_triangles);
+    }
     const double tolerance = settings.concavity * diagonal;
     std::vector<Index> surface;  // proxy vertices that lie in a proxy triangle
     std::vector<bool> in_triangle(proxy.points.size(), false);
