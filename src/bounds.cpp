@@ -159,7 +159,7 @@ void collectByBounds(const std::vector<Body*>& bodies, double motion_factor, dou
   };
   std::vector<Group> groups;
   std::vector<Vec3> tri_lo, tri_hi;
-  std::vector<Index> near_a, near_b;
+  std::vector<Index> near_a, near_b, near_rb;
   for (std::size_t i = 0; i < bodies.size(); ++i) {
     const Body& A = *bodies[i];
     const double ga = A.margin + motion_factor * A.body_box.motion + flag_pad;
@@ -170,11 +170,17 @@ void collectByBounds(const std::vector<Body*>& bodies, double motion_factor, dou
       Group ab{A.id, B.id, {}}, ba{B.id, A.id, {}};
       const PairContext to_b{A, B, A.margin + B.margin, motion_factor, ab.keys, counters};
       const PairContext to_a{B, A, A.margin + B.margin, motion_factor, ba.keys, counters};
+      // Only regions that reach the other body's box can pair up: filter both sides first.
+      near_rb.clear();
+      for (Index rj = 0; rj < B.regionCount(); ++rj)
+        if (overlap(B.region_box[rj], B.margin + motion_factor * B.region_box[rj].motion + flag_pad, A.body_box, ga))
+          near_rb.push_back(rj);
+      if (near_rb.empty()) continue;
       for (Index ri = 0; ri < A.regionCount(); ++ri) {
         const MotionBox& boxI = A.region_box[ri];
         const double gI = A.margin + motion_factor * boxI.motion;
         if (!overlap(boxI, gI + flag_pad, B.body_box, gb)) continue;
-        for (Index rj = 0; rj < B.regionCount(); ++rj) {
+        for (Index rj : near_rb) {
           const MotionBox& boxJ = B.region_box[rj];
           const double gJ = B.margin + motion_factor * boxJ.motion;
           if (!overlap(boxI, gI + flag_pad, boxJ, gJ + flag_pad)) continue;

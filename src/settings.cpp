@@ -22,6 +22,8 @@ void validate(const SensorSettings& s) {
   if (s.max_rounds < 1) bad("max_rounds", s.max_rounds, "must be at least 1");
   if (!std::isfinite(s.motion_factor) || s.motion_factor < 0.0)
     bad("motion_factor", s.motion_factor, "must be finite and not negative");
+  if (s.min_region_vertices < 1)
+    bad("min_region_vertices", static_cast<double>(s.min_region_vertices), "must be at least 1");
   if (s.chunk_vertices < 4) bad("chunk_vertices", static_cast<double>(s.chunk_vertices), "must be at least 4");
   validate(s.partition);
   const DecompositionSettings& d = s.decomposition;

@@ -137,7 +137,10 @@ void SensorWorld::Impl::preparePartitions(StepStats& stats) {
   std::size_t k = 0;
   for (auto& kv : bodies) {
     Body& b = *kv.second;
-    const std::size_t count = std::clamp<std::size_t>(budget[k++], 1, b.vertices_in_triangles);
+    const std::size_t cap = b.particle_override > 0
+                                ? b.vertices_in_triangles
+                                : std::max<std::size_t>(1, b.vertices_in_triangles / settings.min_region_vertices);
+    const std::size_t count = std::clamp<std::size_t>(budget[k++], 1, cap);
     if (!b.partitioned || count != b.budget) {
       const bool again = b.partitioned;
       partitionBody(b, count);

@@ -50,6 +50,11 @@ struct SensorSettings {
   ///   margin_A + margin_B + motion_factor·|x_v − x_v,prev|     (length units)
   /// Bullet's CollideVF_SS uses 2. Only used when a body has a previous-position view. ≥ 0.
   double motion_factor = 2.0;
+  /// [beyond] A body gets at most (vertices in triangles / min_region_vertices) particles from the
+  /// budget (at least 1; an explicit BodyDesc::particles is not capped). The thesis's budget counts
+  /// parts, not vertices: 8 HACD parts × 12 give a 500-vertex torus ~100 regions of 5 vertices.
+  /// 1 = the thesis's budget unchanged.
+  std::size_t min_region_vertices = 64;
   /// [beyond] Vertices per chunk of the bounds layer (≥ 4): smaller = tighter boxes, more boxes.
   std::size_t chunk_vertices = 32;
   /// Build (vertex, triangle) candidate pairs in step(); off = flagged pairs only.

@@ -212,7 +212,9 @@ TEST(Chapter4, ThesisModeAlone) {
     std::cout << "[ thesis mode ] " << sc.meshes.size() << " spheres: " << cov.in_sets << " of " << cov.truth
               << " contacts within mu lie in sensor-flagged sets\n";
     EXPECT_GT(res->stats.flagged_by_sensors, 0u);
-    if (scene == 0) EXPECT_EQ(cov.in_sets, cov.truth) << "thesis case 1 must be complete";
+    if (scene == 0) {
+      EXPECT_EQ(cov.in_sets, cov.truth) << "thesis case 1 must be complete";
+    }
   }
 }
 
