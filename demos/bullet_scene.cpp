@@ -84,7 +84,10 @@ btSoftBody* createSoftBody(btSoftBodyWorldInfo& info, const SoftBodySpec& spec, 
   if (spec.bending_distance > 0) {
     btSoftBody::Material* bend = psb->appendMaterial();
     bend->m_kLST = static_cast<btScalar>(0.5 * spec.stiffness);
-    psb->generateBendingConstraints(spec.bending_distance, bend);
+    if (spec.bending_distance == 2)
+      appendBendingLinks2(*psb, bend);  // Bullet's own needs n² memory: std::bad_alloc at 50k nodes
+    else
+      psb->generateBendingConstraints(spec.bending_distance, bend);
   }
   psb->m_cfg.kDF = static_cast<btScalar>(spec.friction);
   psb->m_cfg.kDP = static_cast<btScalar>(spec.damping);

@@ -176,6 +176,39 @@ void initializeVFTrees(btSoftBody& b) {
   rebuildNodeTree(b);
 }
 
+int appendBendingLinks2(btSoftBody& b, btSoftBody::Material* material) {
+  const int n = b.m_nodes.size();
+  std::vector<std::vector<int>> near(static_cast<std::size_t>(n));
+  for (int i = 0; i < b.m_links.size(); ++i) {
+    const int x = static_cast<int>(b.m_links[i].m_n[0] - &b.m_nodes[0]);
+    const int y = static_cast<int>(b.m_links[i].m_n[1] - &b.m_nodes[0]);
+    near[static_cast<std::size_t>(x)].push_back(y);
+    near[static_cast<std::size_t>(y)].push_back(x);
+  }
+  for (auto& list : near) {
+    std::sort(list.begin(), list.end());
+    list.erase(std::unique(list.begin(), list.end()), list.end());
+  }
+  int added = 0;
+  std::vector<int> ring;
+  for (int j = 0; j < n; ++j) {
+    const auto& first = near[static_cast<std::size_t>(j)];
+    ring.clear();
+    for (int k : first)
+      for (int i : near[static_cast<std::size_t>(k)])
+        if (i > j && !std::binary_search(first.begin(), first.end(), i)) ring.push_back(i);
+    std::sort(ring.begin(), ring.end());
+    ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
+    for (int i : ring) {
+      b.appendLink(i, j, material);
+      // Bullet writes 1 into this signed 1-bit field, which stores -1: store the same bits.
+      b.m_links[b.m_links.size() - 1].m_bbending = -1;
+      ++added;
+    }
+  }
+  return added;
+}
+
 bool sameTree(const btDbvtNode* a, const btDbvtNode* b, const btSoftBody& oa, const btSoftBody& ob, bool faces) {
   if (!a || !b) return a == b;
   if (a->isleaf() != b->isleaf()) return false;

@@ -69,13 +69,18 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 100000));
   app.add_option("--steps", steps, "simulation steps (default: the scene's)")->check(CLI::Range(1, 10000000));
   app.add_option("--seed", params.seed, "placement seed (default 1)");
+  app.add_option("--scale", params.scale,
+                 "multiply every length by this (default 1); Bullet's exact test skips triangles of area "
+                 "below 1.7e-4 units^2, so very fine meshes need a larger scale")
+      ->check(CLI::PositiveNumber);
   app.add_option("--pipeline", pipeline, "sensors, bullet or both (default both)")
       ->check(CLI::IsMember({"sensors", "bullet", "both"}));
   app.add_option("--truth", truth, "ground truth: none, strict, full or both (default both)")
       ->check(CLI::IsMember({"none", "strict", "full", "both"}));
   app.add_option("--mesh", params.mesh_file, "OBJ/OFF/PLY/STL file for scene 8 ('mesh'); alone it selects scene 8");
   app.add_option("--sweep", sweep, "resolution|bodies followed by values, e.g. --sweep resolution 500,1000,2000")
-      ->expected(2, 1000);
+      ->expected(2, 1000)
+      ->type_name("KIND VALUES");
   app.add_option("--json", json, "write results as JSON");
   app.add_option("--csv", csv, "write results as CSV");
   app.add_option("--frames", frames, "write a VTK series per run into DIR (open the .pvd in ParaView)");

@@ -36,7 +36,7 @@ bool runGnuplot(const std::string& script) {
   return std::system(cmd.c_str()) == 0;
 }
 
-const char* kTerminal = "set terminal pngcairo size 1100,620 font 'sans,11'\n";
+const char* kTerminal = "set terminal pngcairo noenhanced size 1100,620 font 'sans,11'\n";
 
 }  // namespace
 
@@ -83,14 +83,14 @@ std::vector<std::string> writePlots(const std::vector<RunResult>& runs, const st
       gp << common << "set output '" << dir << "/scenes_collision_ms.png'\n"
          << "set title 'Soft-soft collision time per step (median), per scene'\nset ylabel 'ms per step'\n"
          << "set logscale y\n"
-         << "plot '" << dir << "/scenes.dat' using 2:xtic(1) title 'particle sensors', '' using 3 title 'Bullet VF\\_SS'\n";
+         << "plot '" << dir << "/scenes.dat' using 2:xtic(1) title 'particle sensors', '' using 3 title 'Bullet VF_SS'\n";
     }
     render("scenes_collision_ms");
     {
       std::ofstream gp = openOut(dir + "/scenes_step_ms.gp");
       gp << common << "set output '" << dir << "/scenes_step_ms.png'\n"
          << "set title 'Whole simulation step (median), per scene'\nset ylabel 'ms per step'\nset logscale y\n"
-         << "plot '" << dir << "/scenes.dat' using 4:xtic(1) title 'particle sensors', '' using 5 title 'Bullet VF\\_SS'\n";
+         << "plot '" << dir << "/scenes.dat' using 4:xtic(1) title 'particle sensors', '' using 5 title 'Bullet VF_SS'\n";
     }
     render("scenes_step_ms");
     {
@@ -131,9 +131,9 @@ std::vector<std::string> writePlots(const std::vector<RunResult>& runs, const st
            << "set xlabel '" << (by_bodies ? "bodies" : "vertices per body") << "'\nset ylabel 'ms per step'\n"
            << "set logscale xy\nset grid\nset key top left\n"
            << "plot '" << dir << "/" << stem << ".dat' using 1:2 with linespoints lw 2 pt 7 title 'sensors: collision', "
-           << "'' using 1:3 with linespoints lw 2 pt 5 title 'Bullet VF\\_SS: collision', "
+           << "'' using 1:3 with linespoints lw 2 pt 5 title 'Bullet VF_SS: collision', "
            << "'' using 1:4 with linespoints dt 2 pt 6 title 'sensors: whole step', "
-           << "'' using 1:5 with linespoints dt 2 pt 4 title 'Bullet VF\\_SS: whole step'\n";
+           << "'' using 1:5 with linespoints dt 2 pt 4 title 'Bullet VF_SS: whole step'\n";
       }
       render(stem);
     }

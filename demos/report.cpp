@@ -96,15 +96,15 @@ const std::vector<std::string>& requiredRunKeys() {
   return keys;
 }
 
-nlohmann::json toJson(const MachineInfo& m) {
+nlohmann::ordered_json toJson(const MachineInfo& m) {
   return {{"cores", m.cores},           {"cpu", m.cpu},
           {"compiler", m.compiler},     {"build_type", m.build_type},
           {"bullet_version", m.bullet_version}, {"bullet_precision", m.bullet_precision},
           {"threads", m.threads},       {"date", m.date}};
 }
 
-nlohmann::json toJson(const RunResult& r) {
-  nlohmann::json j = nlohmann::json::object();
+nlohmann::ordered_json toJson(const RunResult& r) {
+  nlohmann::ordered_json j = nlohmann::ordered_json::object();
   j["scene"] = r.scene;
   j["resolution"] = r.resolution;
   j["bodies"] = r.bodies;
@@ -127,10 +127,16 @@ nlohmann::json toJson(const RunResult& r) {
   j["max_penetration"] = r.max_penetration;
   j["penetration_steps"] = r.penetration_steps;
   j["peak_rss_mb"] = r.peak_rss_mb;
+  if (r.diverged_at_step >= 0) j["diverged_at_step"] = r.diverged_at_step;
   // Beyond the required keys: the rest of BENCHMARK.md's figures and what explains them.
   j["scene_number"] = r.scene_number;
   j["series"] = r.series;
   j["vertices"] = r.vertices;
+  j["scale"] = r.scale;
+  if (r.has_strict) {
+    j["recall_strict_bullet_testable"] = r.recall_strict_testable;
+    j["truth_strict_untestable_by_bullet"] = r.truth_strict_untestable;
+  }
   if (r.has_full) j["recall_full_worst_step"] = r.recall_full_worst_step;
   j["contacts_found"] = r.contacts_found_total;
   if (r.has_strict) j["truth_strict_contacts"] = r.truth_strict_total;
@@ -147,6 +153,12 @@ nlohmann::json toJson(const RunResult& r) {
   j["step_ms_mean"] = r.step_ms_mean;
   j["detect_ms_median"] = r.detect_ms_median;
   j["face_refit_ms_median"] = r.face_refit_ms_median;
+  if (r.pipeline == Pipeline::Bullet) {
+    j["traversal_exact_ms_median"] = r.zone_ms_median;
+  } else {
+    j["sensor_step_ms_median"] = r.sensor_step_ms_median;
+    j["exact_stage_ms_median"] = r.exact_stage_ms_median;
+  }
   if (r.ratio_bullet_over_sensors > 0) j["ratio_bullet_over_sensors"] = r.ratio_bullet_over_sensors;
   j["midphase_bytes_per_vertex"] = r.midphase_bytes_per_vertex;
   j["wall_seconds"] = r.wall_seconds;
@@ -154,17 +166,17 @@ nlohmann::json toJson(const RunResult& r) {
   return j;
 }
 
-nlohmann::json toJson(const MachineInfo& machine, const std::vector<RunResult>& runs) {
-  nlohmann::json doc;
+nlohmann::ordered_json toJson(const MachineInfo& machine, const std::vector<RunResult>& runs) {
+  nlohmann::ordered_json doc;
   doc["machine"] = toJson(machine);
-  doc["runs"] = nlohmann::json::array();
+  doc["runs"] = nlohmann::ordered_json::array();
   for (const RunResult& r : runs) doc["runs"].push_back(toJson(r));
   return doc;
 }
 
 void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
   const char* head =
-      "%-12s %6s %4s %5s %-8s %15s %15s %6s %7s %8s %7s %8s %8s %6s %8s %5s %6s\n";
+      "%-12s %6s %4s %5s %-8s %15s %15s %6s %7s %8s %7s %8s %8s %6s %8s %7s %6s\n";
   char line[512];
   std::snprintf(line, sizeof line, head, "scene", "res", "bod", "steps", "pipeline", "strict all/wst",
                 "full all/wst", "pairs", "outside", "exact/st", "flag/st", "coll ms", "step ms", "B/ours", "max pen",
@@ -181,7 +193,9 @@ void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
                   std::to_string(r.bodies).c_str(), std::to_string(r.steps).c_str(), toString(r.pipeline), strict.c_str(),
                   full.c_str(), pairs.c_str(), outside.c_str(), count(r.exact_tests_per_step).c_str(), flagged.c_str(),
                   ms(r.collision_ms_median).c_str(), ms(r.step_ms_median).c_str(), ratio.c_str(),
-                  fixed(r.max_penetration, 3).c_str(), std::to_string(r.penetration_steps).c_str(),
+                  fixed(r.max_penetration, 3).c_str(),
+                  (r.diverged_at_step >= 0 ? "DIV@" + std::to_string(r.diverged_at_step)
+                                           : std::to_string(r.penetration_steps)).c_str(),
                   fixed(r.peak_rss_mb, 0).c_str());
     out << line;
   }
@@ -197,7 +211,7 @@ void writeCsv(const std::string& path, const std::vector<RunResult>& runs) {
   std::ofstream out = openOut(path);
   // Every key that any run has, required ones first; empty cells where a key does not apply.
   std::vector<std::string> keys = requiredRunKeys();
-  std::vector<nlohmann::json> rows;
+  std::vector<nlohmann::ordered_json> rows;
   for (const RunResult& r : runs) {
     rows.push_back(toJson(r));
     for (const auto& item : rows.back().items())
@@ -205,11 +219,11 @@ void writeCsv(const std::string& path, const std::vector<RunResult>& runs) {
   }
   for (std::size_t k = 0; k < keys.size(); ++k) out << (k ? "," : "") << keys[k];
   out << '\n';
-  for (const nlohmann::json& row : rows) {
+  for (const nlohmann::ordered_json& row : rows) {
     for (std::size_t k = 0; k < keys.size(); ++k) {
       if (k) out << ',';
       if (!row.contains(keys[k])) continue;
-      const nlohmann::json& v = row[keys[k]];
+      const nlohmann::ordered_json& v = row[keys[k]];
       if (v.is_string()) {
         std::string s = v.get<std::string>();
         std::string quoted = "\"";

@@ -23,9 +23,9 @@ MachineInfo machineInfo();
 /// The JSON keys every run carries where they apply (issue 4), in output order.
 const std::vector<std::string>& requiredRunKeys();
 
-nlohmann::json toJson(const MachineInfo& machine);
-nlohmann::json toJson(const RunResult& run);
-nlohmann::json toJson(const MachineInfo& machine, const std::vector<RunResult>& runs);
+nlohmann::ordered_json toJson(const MachineInfo& machine);
+nlohmann::ordered_json toJson(const RunResult& run);
+nlohmann::ordered_json toJson(const MachineInfo& machine, const std::vector<RunResult>& runs);
 
 /// One header line and one line per run; recall columns show "-" without truth.
 void printTable(std::ostream& out, const std::vector<RunResult>& runs);

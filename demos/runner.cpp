@@ -73,6 +73,15 @@ double coordinateScale(const std::vector<TruthBody>& bodies) {
   return s;
 }
 
+bool diverged(SceneWorld& sw, double far_out) {
+  for (const btSoftBody* psb : sw.softBodies())
+    for (int i = 0; i < psb->m_nodes.size(); ++i) {
+      const btVector3& x = psb->m_nodes[i].m_x;
+      if (!(std::abs(x.x()) < far_out && std::abs(x.y()) < far_out && std::abs(x.z()) < far_out)) return true;
+    }
+  return false;
+}
+
 struct PairKey {
   Index a, b;
   bool operator<(const PairKey& o) const { return a != o.a ? a < o.a : b < o.b; }
@@ -129,6 +138,7 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
   r.scene = scene.name;
   if (const SceneInfo* info = findScene(scene.name)) r.scene_number = info->number;
   r.title = scene.title;
+  r.scale = scene.scale;
   r.note = scene.note;
   r.pipeline = pipeline;
   r.bodies = scene.bodies.size();
@@ -170,7 +180,7 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
   double worst_strict = 1.0, worst_full = 1.0;
   std::size_t exact_total = 0, flagged_total = 0;
   long rounds_total = 0;
-  std::vector<double> detect_per_step, refit_per_step;
+  std::vector<double> detect_per_step, refit_per_step, zone_per_step, sensor_per_step, exact_per_step;
 
   // Measurement inside the step, where contacts were just decided: positions are m_x (predicted)
   // and m_q (previous), exactly what CollideVF_SS used.
@@ -203,6 +213,12 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
       }
       truth_pairs.clear();
       for (const TruthContact& c : tr.contacts) {
+        if (c.strict == Membership::Inside) {
+          const TruthBody& tb = bodies[c.key.triangle_body];
+          const Triangle& t = tb.triangles[c.key.triangle];
+          const double cross2 = (tb.x[t[1]] - tb.x[t[0]]).cross(tb.x[t[2]] - tb.x[t[0]]).squaredNorm();
+          r.truth_strict_untestable += cross2 <= double(SIMD_EPSILON);
+        }
         const Membership widest = r.has_full ? c.full : c.strict;
         if (widest == Membership::Inside) truth_pairs.insert(pairOf(c.key.vertex_body, c.key.triangle_body));
         r.truth_ambiguous += (c.strict == Membership::Ambiguous || c.full == Membership::Ambiguous);
@@ -219,6 +235,12 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
     }
     hook_ms += msSince(h0);
   };
+
+  // Far enough out to mean the simulation blew up, not that a body bounced.
+  double far_out = 1.0;
+  for (const SoftBodySpec& b : scene.bodies)
+    for (const Vec3& v : b.mesh.vertices) far_out = std::max(far_out, v.cwiseAbs().maxCoeff());
+  far_out *= 1000.0;
 
   std::unique_ptr<FrameSeries> frames;
   if (!opt.frames_dir.empty()) {
@@ -239,10 +261,11 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
     double collision_ms = refit_ms;
     const double zone_ms = zone.takeMs();
     zone.takeCount();
+    SensorStepFigures f;
     if (pipeline == Pipeline::Bullet) {
       collision_ms += zone_ms;
     } else {
-      const SensorStepFigures f = sensors->takeStep();
+      f = sensors->takeStep();
       collision_ms += f.ms_sensor + f.ms_exact + zone_ms;  // zone_ms: pairs handed back to Bullet
       exact_total += f.exact_tests;
       flagged_total += f.flagged_pairs;
@@ -258,6 +281,15 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
       r.step_ms_per_step.push_back(step_ms);
       detect_per_step.push_back(detect_ms);
       refit_per_step.push_back(refit_ms);
+      zone_per_step.push_back(zone_ms);
+      sensor_per_step.push_back(f.ms_sensor);
+      exact_per_step.push_back(f.ms_exact);
+    }
+
+    if (diverged(sw, far_out)) {
+      r.diverged_at_step = static_cast<long>(step);
+      r.steps = step + 1;
+      break;
     }
 
     // After the step: what the user sees. Vertices inside another closed body beyond the margins.
@@ -325,6 +357,9 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
   r.recall_strict = r.truth_strict_total ? double(r.found_in_strict) / double(r.truth_strict_total) : 1.0;
   r.recall_full = r.truth_full_total ? double(r.found_in_full) / double(r.truth_full_total) : 1.0;
   r.recall_strict_worst_step = worst_strict;
+  r.recall_strict_testable = r.truth_strict_total > r.truth_strict_untestable
+                                 ? double(r.found_in_strict) / double(r.truth_strict_total - r.truth_strict_untestable)
+                                 : 1.0;
   r.recall_full_worst_step = worst_full;
   r.pair_recall = r.truth_pairs_total ? double(r.truth_pairs_found) / double(r.truth_pairs_total) : 1.0;
   r.exact_tests_per_step = double(exact_total) / steps;
@@ -341,6 +376,9 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
   r.step_ms_mean = mean(r.step_ms_per_step);
   r.detect_ms_median = median(detect_per_step);
   r.face_refit_ms_median = median(refit_per_step);
+  r.zone_ms_median = median(zone_per_step);
+  r.sensor_step_ms_median = median(sensor_per_step);
+  r.exact_stage_ms_median = median(exact_per_step);
   if (sensors) {
     r.midphase_bytes_per_vertex = sensors->midphaseBytesPerVertex();
   } else {

@@ -52,6 +52,11 @@ struct RunResult {
   double pair_recall = 1.0;
   std::size_t truth_strict_total = 0, truth_full_total = 0, found_in_strict = 0, found_in_full = 0;
   std::size_t truth_ambiguous = 0;         ///< pairs in the rounding band, not counted either way
+  /// Strict-truth contacts on triangles that Bullet's CollideVF_SS refuses outright (|cross|² ≤
+  /// SIMD_EPSILON): no pipeline ending in Bullet's exact test can find them.
+  std::size_t truth_strict_untestable = 0;
+  double recall_strict_testable = 1.0;     ///< recall over the strict truth without those
+  double scale = 1.0;                      ///< SceneParams::scale of the run
   std::size_t contacts_found_total = 0;
   std::size_t contacts_outside_truth = 0;  ///< only with the full truth
   std::size_t truth_pairs_total = 0, truth_pairs_found = 0;
@@ -68,8 +73,14 @@ struct RunResult {
   double collision_ms_mean = 0.0, step_ms_mean = 0.0;
   double detect_ms_median = 0.0;           ///< whole performDiscreteCollisionDetection (cross-check)
   double face_refit_ms_median = 0.0;
+  /// The parts of collision ms, medians over the timed steps: Bullet's tree traversal + exact
+  /// tests (the profile zone); the plugin's sensor step and its exact stage.
+  double zone_ms_median = 0.0, sensor_step_ms_median = 0.0, exact_stage_ms_median = 0.0;
   double max_penetration = 0.0;
   std::size_t penetration_steps = 0;
+  /// First step after which a node position was non-finite or absurdly far out (1000 scene
+  /// extents): the simulation blew up and the run stopped there; -1 = it did not.
+  long diverged_at_step = -1;
   double peak_rss_mb = 0.0;
   double midphase_bytes_per_vertex = 0.0;
   double ratio_bullet_over_sensors = 0.0;  ///< collision ms, filled when both pipelines ran

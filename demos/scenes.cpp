@@ -14,6 +14,12 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kGravity = 9.81;
+/// Piles step at 120 Hz. Bullet's soft-soft response (PSolve_SContacts) pushes a node out to
+/// margin + 2·|Δx|, so a node that moved far is pushed further and moves faster still: at 60 Hz
+/// dense piles of 2,000-vertex tori diverged (node speeds > 1,000 units/s, then NaN) in both
+/// pipelines, and even without divergence nodes jittered at 30-50 units/s; at 120 Hz the fastest
+/// node settles near 10 units/s.
+constexpr double kPileStep = 1.0 / 120.0;
 
 /// splitmix64: the same numbers on every platform and standard library (std::uniform_*
 /// distributions are implementation-defined), so a seed names one scene everywhere.
@@ -39,19 +45,20 @@ class Random {
 
 Error badParam(const std::string& what) { return Error(ErrorCode::InvalidArgument, what); }
 
-/// Closed bodies hold their shape with gas pressure (Bullet's kPR, scaled with the mass so that
-/// light and heavy bodies sag alike: a 2 kg unit ball resting on the ground keeps ~90% of its
-/// height). Bullet's kVC alone let balls flatten to 60% under their own weight. No shape matching:
-/// a frame pose moves nodes after the face-tree refit and would break the exact split of Bullet's
-/// collision time (bullet_scene.h).
+/// Closed bodies hold their shape with bending links (2-ring) and volume conservation (kVC with
+/// the rest volume): a 2 kg unit ball resting on the ground keeps ~85% of its height. Measured
+/// alternatives: kVC alone let balls flatten to 60%; gas pressure (kPR, force ∝ 1/V) blew piles
+/// apart once a squeezed tube's volume neared zero. No shape matching: a frame pose moves nodes
+/// after the face-tree refit and would break the exact split of Bullet's collision time
+/// (bullet_scene.h).
 SoftBodySpec ball(std::string name, TriMesh mesh, double mass = 1.0) {
   SoftBodySpec b;
   b.name = std::move(name);
   b.mesh = std::move(mesh);
   b.mass = mass;
   b.stiffness = 0.9;
-  b.pressure = 50.0 * mass;
-  b.bending_distance = 0;
+  b.volume_conservation = 20.0;
+  b.bending_distance = 2;
   return b;
 }
 
@@ -207,6 +214,7 @@ Scene toriPile(const SceneParams& p, std::size_t k) {
   Scene s;
   s.title = std::to_string(k) + " soft tori dropped into a pile";
   s.gravity = {0, -kGravity, 0};
+  s.dt = kPileStep;
   s.statics.push_back(ground());
   Random rng(p.seed);
   for (std::size_t i = 0; i < k; ++i) {
@@ -224,6 +232,7 @@ Scene mixedPile(const SceneParams& p, std::size_t k) {
   Scene s;
   s.title = std::to_string(k) + " spheres, tori and cloth patches dropped into a static box";
   s.gravity = {0, -kGravity, 0};
+  s.dt = kPileStep;
   const double inner = 2.0;  // half width inside the walls
   s.statics.push_back(ground(inner + 1.0));
   s.statics.push_back({Vec3(-inner - 0.25, 3.5, 0), Vec3(0.25, 4.0, inner + 0.5)});
@@ -306,6 +315,7 @@ Scene meshDrop(const SceneParams& p, std::size_t k) {
   normalizeMesh(base, 0.8);
   s.title = std::to_string(k) + " copies of a mesh dropped onto each other";
   s.gravity = {0, -kGravity, 0};
+  s.dt = kPileStep;
   s.statics.push_back(ground());
   Random rng(p.seed);
   const bool closed = isClosed(base);
@@ -372,6 +382,27 @@ Scene makeScene(const std::string& key, const SceneParams& p) {
   else s = meshDrop(p, bodyCount(p, *info));
   s.name = n;
   s.default_steps = info->default_steps;
+  if (!(p.scale > 0.0) || !std::isfinite(p.scale))
+    throw badParam("scale " + std::to_string(p.scale) + " must be a positive finite number");
+  if (p.scale != 1.0) {
+    // Lengths ×k with the same dt: velocities and accelerations ×k as well. Bullet's volume force
+    // grows as area × volume (k⁵) against an acceleration that grows as k, hence kVC × k⁻⁴; the
+    // position-based links and contacts are scale-free.
+    const double k = p.scale;
+    for (SoftBodySpec& b : s.bodies) {
+      b.mesh.scale(k);
+      b.velocity *= k;
+      b.margin *= k;
+      b.volume_conservation /= k * k * k * k;
+    }
+    for (StaticBoxSpec& box : s.statics) {
+      box.center *= k;
+      box.half_extents *= k;
+    }
+    s.gravity *= k;
+    s.note += std::string(s.note.empty() ? "" : "; ") + "lengths scaled by " + std::to_string(k);
+  }
+  s.scale = p.scale;
   for (SoftBodySpec& b : s.bodies) {
     b.closed = isClosed(b.mesh);
     if (!b.closed) {

@@ -19,6 +19,11 @@ struct SceneParams {
   std::size_t bodies = 0;         ///< body count for scenes that take one; 0 = the scene's default
   std::uint64_t seed = 1;         ///< placement jitter and orientations
   std::string mesh_file;          ///< scene 8: OBJ/OFF/PLY/STL; empty = the built-in default
+  /// Multiplies every length (and so velocities, gravity, margins) by this factor; the motion in
+  /// scene units is unchanged. Bullet's CollideVF_SS skips triangles whose |cross product|² is
+  /// ≤ FLT_EPSILON (area ≤ 1.7e-4 units² in single precision), so at scale 1 fine meshes
+  /// (~30k+ vertices on a unit sphere) get no soft-soft contacts in either pipeline.
+  double scale = 1.0;
 };
 
 /// A soft body: a triangle mesh and Bullet material numbers (btSoftBody::Config / Material).
@@ -52,6 +57,7 @@ struct Scene {
   double dt = 1.0 / 60.0;       ///< fixed step, s
   int position_iterations = 4;  ///< Bullet's piterations on every body
   std::size_t default_steps = 120;
+  double scale = 1.0;           ///< SceneParams::scale it was built with
   std::string note;             ///< e.g. which mesh file was used
   /// Vertices per body actually used (the generators round); the mean over bodies.
   std::size_t resolution() const;

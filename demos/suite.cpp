@@ -42,8 +42,12 @@ std::string summary(const RunResult& r) {
   std::string s = std::string(toString(r.pipeline)) + ": " + fmt("%.3g", r.collision_ms_median) + " ms coll, " +
                   fmt("%.3g", r.step_ms_median) + " ms step";
   if (r.has_strict) s += ", strict " + fmt("%.4f", r.recall_strict);
+  if (r.has_strict && r.truth_strict_untestable)
+    s += " (" + fmt("%.4f", r.recall_strict_testable) + " without " + std::to_string(r.truth_strict_untestable) +
+         " on triangles CollideVF_SS refuses)";
   if (r.has_full) s += ", full " + fmt("%.4f", r.recall_full);
   if (r.penetration_steps) s += ", penetration " + fmt("%.3f", r.max_penetration);
+  if (r.diverged_at_step >= 0) s += ", DIVERGED after step " + std::to_string(r.diverged_at_step);
   return s;
 }
 
@@ -62,7 +66,8 @@ std::vector<Job> defaultSuite() {
     j.scene = "tori_pile";
     j.params.resolution = res;
     j.params.bodies = 8;
-    j.steps = 60;
+    j.steps = 100;
+    j.warmup = 40;
     j.series = "sweep_resolution";
     jobs.push_back(j);
   }
@@ -110,6 +115,7 @@ int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ost
       for (Pipeline p : options.pipelines) {
         RunOptions ro = options.run;
         ro.steps = steps;
+        if (job.warmup) ro.warmup = job.warmup;
         if (!ro.frames_dir.empty())
           ro.frames_name = scene.name + "_" + std::to_string(scene.resolution()) + "v_" +
                            std::to_string(scene.bodies.size()) + "b_" + toString(p);

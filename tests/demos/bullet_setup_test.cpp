@@ -50,6 +50,26 @@ TEST(BulletSetup, FastSetupBuildsBulletsOwnTrees) {
   }
 }
 
+TEST(BulletSetup, BendingLinksEqualBulletsOwn) {
+  for (const TriMesh& mesh : {makeSphere(1.0, 200), makePatch(2.0, 2.0, 9, 11), makeTorus(1.0, 0.3, 150)}) {
+    SoftBodySpec spec = specOf("body", mesh, 0);
+    btSoftBodyWorldInfo info;
+    btSoftBody* ours = createSoftBody(info, spec, btSoftBody::fCollision::SDF_RS, 4);
+    btSoftBody* own = createSoftBody(info, spec, btSoftBody::fCollision::SDF_RS, 4);
+    const int added = appendBendingLinks2(*ours, ours->appendMaterial());
+    EXPECT_EQ(added, own->generateBendingConstraints(2, own->appendMaterial()));
+    ASSERT_EQ(ours->m_links.size(), own->m_links.size());
+    for (int i = 0; i < ours->m_links.size(); ++i) {
+      for (int k = 0; k < 2; ++k)
+        ASSERT_EQ(ours->m_links[i].m_n[k] - &ours->m_nodes[0], own->m_links[i].m_n[k] - &own->m_nodes[0]) << "link " << i;
+      ASSERT_EQ(ours->m_links[i].m_bbending, own->m_links[i].m_bbending) << "link " << i;
+    }
+    EXPECT_GT(added, 0);
+    delete ours;
+    delete own;
+  }
+}
+
 TEST(BulletSetup, BodyInSeveralPiecesIsAnErrorNotAHang) {
   TriMesh two = makeSphere(1.0, 100);
   TriMesh other = makeSphere(1.0, 100).translate({3, 0, 0});
