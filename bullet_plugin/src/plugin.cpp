@@ -10,6 +10,7 @@
 namespace psc::bullet {
 
 Plugin::Plugin(std::unique_ptr<Installation> installation) : impl_(std::move(installation)) {}
+Plugin::Plugin() = default;
 Plugin::~Plugin() = default;
 Plugin::Plugin(Plugin&&) noexcept = default;
 Plugin& Plugin::operator=(Plugin&&) noexcept = default;

@@ -43,7 +43,7 @@ class Installation;
 /// Owns everything install() added to a world. Move-only; empty after a move or uninstall().
 class Plugin {
  public:
-  Plugin() = default;
+  Plugin();  ///< empty; defined where Installation is complete
   explicit Plugin(std::unique_ptr<Installation> installation);
   ~Plugin();  ///< uninstalls
   Plugin(Plugin&&) noexcept;
