@@ -130,15 +130,51 @@ Proxy decimate(const MeshTopology& topology, const PositionView& positions, std:
 
 // Runs HACD on the proxy and labels each proxy vertex with the cluster most of its triangles
 // belong to (ties: the lower cluster). Proxy vertices in no proxy triangle get kInvalidIndex.
+// HACD's hull code (ICHull) double-frees on degenerate input; the fuzzer found two such inputs.
+// It is only given consistently wound surfaces (no directed edge twice) that enclose a clear volume;
+// anything else is labelled one part per connected piece, without HACD. Cost: shapes whose
+// coincident vertices merge into a non-manifold proxy (makeFork's crotch) get one part.
+bool safeForHacd(const Proxy& proxy) {
+  if (proxy.triangles.size() < 4) return false;
+  std::map<std::pair<Index, Index>, int> directed;
+  for (const Triangle& t : proxy.triangles)
+    for (std::size_t k = 0; k < 3; ++k)
+      if (++directed[{t[k], t[(k + 1) % 3]}] > 1) return false;  // a directed edge twice: bad winding
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  double volume6 = 0.0;
+  for (const Triangle& t : proxy.triangles) {
+    const Vec3 &a = proxy.points[t[0]], &b = proxy.points[t[1]], &c = proxy.points[t[2]];
+    volume6 += a.dot(b.cross(c));
+    lo = lo.cwiseMin(a).cwiseMin(b).cwiseMin(c);
+    hi = hi.cwiseMax(a).cwiseMax(b).cwiseMax(c);
+  }
+  const double d = (hi - lo).norm();
+  return std::isfinite(volume6) && volume6 > 1e-6 * d * d * d;
+}
+
+std::vector<Index> pieceLabels(const Proxy& proxy) {
+  std::vector<Index> label(proxy.points.size(), kInvalidIndex);
+  std::vector<Index> parent(proxy.points.size());
+  for (std::size_t i = 0; i < parent.size(); ++i) parent[i] = static_cast<Index>(i);
+  const auto root = [&](Index x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  for (const Triangle& t : proxy.triangles)
+    for (std::size_t k = 1; k < 3; ++k) {
+      const Index a = root(t[0]), b = root(t[k]);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+  std::map<Index, Index> piece;
+  for (const Triangle& t : proxy.triangles)
+    for (Index v : t) label[v] = piece.emplace(root(v), static_cast<Index>(piece.size())).first->second;
+  return label;
+}
+
 std::vector<Index> hacdLabels(const Proxy& proxy, const DecompositionSettings& settings) {
   std::vector<Index> label(proxy.points.size(), kInvalidIndex);
   if (proxy.triangles.empty()) return label;
-  // Fewer than 4 triangles cannot enclose anything: one part, without HACD's hull code.
-  if (proxy.triangles.size() < 4) {
-    for (const Triangle& t : proxy.triangles)
-      for (Index v : t) label[v] = 0;
-    return label;
-  }
+  if (!safeForHacd(proxy)) return pieceLabels(proxy);
   // HACD normalises the points it is given in place, hence the copy.
   std::vector<HACD::Vec3<HACD::Real>> points;
   points.reserve(proxy.points.size());
