@@ -1,3 +1,5 @@
+#include "test_util.h"
+
 #include "psc/error.h"
 #include "psc/mesh.h"
 #include "psc/shapes.h"
@@ -10,14 +12,7 @@
 namespace psc {
 namespace {
 
-std::string messageOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "no error";
-}
+using test::messageOf;
 
 TEST(Mesh, AdjacencyEqualsBruteForce) {
   const TriMesh m = makeTorus(1.0, 0.3, 400);

@@ -194,3 +194,22 @@ inline std::size_t selfIntersections(const std::vector<Vec3>& v, const std::vect
 }
 
 }  // namespace psc::test
+
+#include "psc/error.h"
+
+#include <functional>
+#include <string>
+
+namespace psc::test {
+
+/// The message of the psc::Error that `f` throws, or "no error".
+inline std::string messageOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
+}  // namespace psc::test

@@ -2,6 +2,8 @@
 // sets, determinism, repartitioning and bad input.
 #include "reference.h"
 
+#include "test_util.h"
+
 #include "psc/error.h"
 #include "psc/repartition.h"
 #include "psc/shapes.h"
@@ -332,14 +334,7 @@ TEST(Repartition, WalkEstimatorMatchesRectangleOnPatch) {
   EXPECT_NEAR(regionAreasTrue(topo, PositionView::of(p.vertices), part)[0], 2.0, 1e-9);
 }
 
-std::string messageOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "no error";
-}
+using test::messageOf;
 
 TEST(WorldErrors, BadBodiesAreNamed) {
   SensorWorld w;
