@@ -1,4 +1,4 @@
-// The contacts that exist (BENCHMARK.md "Ground truth"), computed independently of both
+// The contacts that exist (docs/BENCHMARK.md, "Ground truth"), computed independently of both
 // pipelines: a dense uniform grid over the triangles of all bodies and an exact point-triangle
 // distance in double. Shares no candidate-finding code with psc::core or the plugin; a test checks
 // it against the brute-force reference below on small scenes, both radii.

@@ -9,6 +9,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <sstream>
@@ -50,7 +51,7 @@ void listScenes() {
 
 int main(int argc, char** argv) {
   if (argc == 1) {
-    std::cerr << "psc_demo: no arguments: running the default suite (every scene, both pipelines, both ground truths; "
+    std::cerr << "psc_demo: no arguments: running the default suite (every scene, all three pipelines, both ground truths; "
                  "results/ gets demo.json, demo.csv and plots/). psc_demo --help lists the options.\n";
     return runSuite(defaultSuite(), defaultSuiteOptions(), std::cout, std::cerr);
   }
@@ -60,7 +61,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> scenes;
   SceneParams params;
   std::size_t steps = 0, warmup = 0, frame_every = 1;
-  std::string pipeline = "both", truth = "both", json, csv, frames, plot_dir;
+  std::string pipeline = "both", flagging = "default", truth = "both", exact = "bullet", json, csv, frames, plot_dir;
   std::vector<std::string> sweep;
   bool list = false, no_penetration = false;
   app.add_option("--scene", scenes, "scene name or number, repeatable, or 'all' (default: all; see --list-scenes)");
@@ -73,8 +74,19 @@ int main(int argc, char** argv) {
                  "multiply every length by this (default 1); Bullet's exact test skips triangles of area "
                  "below 1.7e-4 units^2, so very fine meshes need a larger scale")
       ->check(CLI::PositiveNumber);
-  app.add_option("--pipeline", pipeline, "sensors, bullet or both (default both)")
-      ->check(CLI::IsMember({"sensors", "bullet", "both"}));
+  app.add_option("--pipeline", pipeline,
+                 "sensors, bounds (sensors with the sensor stage off: boxes only), bullet, both (sensors and "
+                 "bullet; the default) or all (all three)")
+      ->check(CLI::IsMember({"sensors", "bounds", "bullet", "both", "all"}));
+  app.add_option("--flagging", flagging,
+                 "the sensors run's flagging: default (Flagging::SensorsAndBounds) or thesis (Flagging::Sensors, "
+                 "the thesis's flag-only mode)")
+      ->check(CLI::IsMember({"default", "thesis"}));
+  app.add_option("--exact", exact,
+                 "the sensors' exact test: bullet (Bullet's CollideVF_SS), robust (also small triangles, any "
+                 "scale) or continuous (robust + crossings during the step); default bullet. Bullet's own "
+                 "pipeline always uses Bullet's test")
+      ->check(CLI::IsMember({"bullet", "robust", "continuous"}));
   app.add_option("--truth", truth, "ground truth: none, strict, full or both (default both)")
       ->check(CLI::IsMember({"none", "strict", "full", "both"}));
   app.add_option("--mesh", params.mesh_file, "OBJ/OFF/PLY/STL file for scene 8 ('mesh'); alone it selects scene 8");
@@ -86,7 +98,7 @@ int main(int argc, char** argv) {
   app.add_option("--frames", frames, "write a VTK series per run into DIR (open the .pvd in ParaView)");
   app.add_option("--frame-every", frame_every, "with --frames: every n-th step (default 1)")->check(CLI::Range(1, 1000000));
   app.add_option("--plot", plot_dir, "write PNG plots into DIR (needs gnuplot)");
-  app.add_option("--warmup", warmup, "steps left out of the timing medians (default min(10, steps/10))");
+  app.add_option("--warmup", warmup, "steps left out of the timing means and medians (default min(10, steps/10))");
   app.add_flag("--no-penetration", no_penetration, "skip the inside tests after each step");
   app.add_flag("--list-scenes", list, "list the scenes and exit");
   try {
@@ -117,19 +129,26 @@ int main(int argc, char** argv) {
 
     SuiteOptions options;
     options.pipelines.clear();
-    if (pipeline != "bullet") options.pipelines.push_back(Pipeline::Sensors);
-    if (pipeline != "sensors") options.pipelines.push_back(Pipeline::Bullet);
-    if (pipeline == "sensors" && !SensorPipeline::available())
+    if (pipeline == "sensors" || pipeline == "both" || pipeline == "all") options.pipelines.push_back(Pipeline::Sensors);
+    if (pipeline == "bounds" || pipeline == "all") options.pipelines.push_back(Pipeline::Bounds);
+    if (pipeline == "bullet" || pipeline == "both" || pipeline == "all") options.pipelines.push_back(Pipeline::Bullet);
+    if ((pipeline == "sensors" || pipeline == "bounds") && !SensorPipeline::available())
       throw psc::Error(psc::ErrorCode::InvalidArgument, "this psc_demo was built without psc::bullet: use --pipeline bullet");
-    if (!SensorPipeline::available() && pipeline == "both") {
+    if (!SensorPipeline::available() && (pipeline == "both" || pipeline == "all")) {
       std::cerr << "psc_demo: warning: built without psc::bullet, running the Bullet pipeline only\n";
       options.pipelines = {Pipeline::Bullet};
     }
+    if (flagging == "thesis" && std::find(options.pipelines.begin(), options.pipelines.end(), Pipeline::Sensors) ==
+                                    options.pipelines.end())
+      throw psc::Error(psc::ErrorCode::InvalidArgument,
+                       "--flagging thesis sets the sensors run's flagging, but --pipeline " + pipeline + " has no sensors run");
+    options.run.flagging = flagging == "thesis" ? FlaggingMode::Thesis : FlaggingMode::Default;
     options.run.truth = truth == "none"     ? TruthMode::None
                         : truth == "strict" ? TruthMode::Strict
                         : truth == "full"   ? TruthMode::Full
                                             : TruthMode::Both;
     options.run.penetration = !no_penetration;
+    options.run.exact = exact;
     options.run.frames_dir = frames;
     options.run.frame_every = frame_every;
     options.run.warmup = warmup;

@@ -91,7 +91,8 @@ const std::vector<std::string>& requiredRunKeys() {
   static const std::vector<std::string> keys = {
       "scene", "resolution", "bodies", "steps", "pipeline", "recall_strict", "recall_full",
       "recall_strict_worst_step", "pair_recall", "contacts_outside_truth", "exact_tests_per_step",
-      "flagged_pairs_per_step", "particles", "collision_ms_median", "step_ms_median", "max_penetration",
+      "flagged_pairs_per_step", "particles", "collision_ms_mean", "step_ms_mean", "collision_ms_median",
+      "step_ms_median", "max_penetration",
       "penetration_steps", "peak_rss_mb"};
   return keys;
 }
@@ -110,6 +111,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["bodies"] = r.bodies;
   j["steps"] = r.steps;
   j["pipeline"] = toString(r.pipeline);
+  j["exact"] = r.exact;
   if (r.has_strict) {
     j["recall_strict"] = r.recall_strict;
     j["recall_strict_worst_step"] = r.recall_strict_worst_step;
@@ -122,13 +124,15 @@ nlohmann::ordered_json toJson(const RunResult& r) {
     j["flagged_pairs_per_step"] = r.flagged_pairs_per_step;
     j["particles"] = r.particles;
   }
+  j["collision_ms_mean"] = r.collision_ms_mean;
+  j["step_ms_mean"] = r.step_ms_mean;
   j["collision_ms_median"] = r.collision_ms_median;
   j["step_ms_median"] = r.step_ms_median;
   j["max_penetration"] = r.max_penetration;
   j["penetration_steps"] = r.penetration_steps;
   j["peak_rss_mb"] = r.peak_rss_mb;
   if (r.diverged_at_step >= 0) j["diverged_at_step"] = r.diverged_at_step;
-  // Beyond the required keys: the rest of BENCHMARK.md's figures and what explains them.
+  // Beyond the required keys: the rest of the figures (docs/BENCHMARK.md) and what explains them.
   j["scene_number"] = r.scene_number;
   j["series"] = r.series;
   j["vertices"] = r.vertices;
@@ -149,17 +153,36 @@ nlohmann::ordered_json toJson(const RunResult& r) {
     j["fallback_pairs"] = r.fallback_pairs;
     if (!r.pipeline_error.empty()) j["pipeline_error"] = r.pipeline_error;
   }
-  j["collision_ms_mean"] = r.collision_ms_mean;
-  j["step_ms_mean"] = r.step_ms_mean;
-  j["detect_ms_median"] = r.detect_ms_median;
-  j["face_refit_ms_median"] = r.face_refit_ms_median;
-  if (r.pipeline == Pipeline::Bullet) {
-    j["traversal_exact_ms_median"] = r.zone_ms_median;
-  } else {
-    j["sensor_step_ms_median"] = r.sensor_step_ms_median;
-    j["exact_stage_ms_median"] = r.exact_stage_ms_median;
+  if (!r.flagging.empty()) j["flagging"] = r.flagging;
+  j["warmup_steps"] = r.warmup;
+  j["timed_steps"] = r.timed_steps;
+  j["contact_steps_timed"] = r.contact_steps_timed;
+  if (r.contact_steps_timed) j["collision_ms_contact_median"] = r.collision_ms_contact_median;
+  j["collision_ms_max"] = r.collision_ms_max;
+  j["step_ms_max"] = r.step_ms_max;
+  j["detect_ms_median"] = r.stage_ms_median.detect;
+  const StepTimes& mean = r.stage_ms_mean;
+  const StepTimes& median = r.stage_ms_median;
+  j["face_refit_ms_mean"] = mean.face_refit;
+  j["face_refit_ms_median"] = median.face_refit;
+  // Bullet's traversal and exact tests; for ours the pairs handed back to Bullet (normally none).
+  j["traversal_exact_ms_mean"] = mean.traversal_exact;
+  j["traversal_exact_ms_median"] = median.traversal_exact;
+  if (r.pipeline != Pipeline::Bullet) {
+    j["sensor_step_ms_mean"] = mean.sensor_step;
+    j["sensor_step_ms_median"] = median.sensor_step;
+    j["exact_ms_mean"] = mean.exact;
+    j["exact_stage_ms_median"] = median.exact;
+    j["particle_ms_mean"] = mean.particle;
+    j["refit_ms_mean"] = mean.refit;
+    j["flagging_ms_mean"] = mean.flagging;
+    j["candidates_ms_mean"] = mean.candidates;
+    j["repartition_ms_mean"] = mean.repartition;
+    j["core_step_ms_mean"] = mean.core_total;
   }
   if (r.ratio_bullet_over_sensors > 0) j["ratio_bullet_over_sensors"] = r.ratio_bullet_over_sensors;
+  if (r.ratio_bullet_over_bounds > 0) j["ratio_bullet_over_bounds"] = r.ratio_bullet_over_bounds;
+  if (r.ratio_bounds_over_sensors > 0) j["ratio_bounds_over_sensors"] = r.ratio_bounds_over_sensors;
   j["midphase_bytes_per_vertex"] = r.midphase_bytes_per_vertex;
   j["wall_seconds"] = r.wall_seconds;
   if (!r.note.empty()) j["note"] = r.note;
@@ -188,11 +211,15 @@ void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
     const std::string pairs = (r.has_strict || r.has_full) ? fixed(r.pair_recall, 3) : "-";
     const std::string outside = r.has_full ? count(double(r.contacts_outside_truth)) : "-";
     const std::string flagged = r.has_sensor_figures ? count(r.flagged_pairs_per_step) : "-";
-    const std::string ratio = r.ratio_bullet_over_sensors > 0 ? fixed(r.ratio_bullet_over_sensors, 2) : "";
+    // Bullet's collision mean over this run's, on the rows of our pipelines.
+    const double b_over_ours = r.pipeline == Pipeline::Sensors  ? r.ratio_bullet_over_sensors
+                               : r.pipeline == Pipeline::Bounds ? r.ratio_bullet_over_bounds
+                                                                : 0.0;
+    const std::string ratio = b_over_ours > 0 ? fixed(b_over_ours, 2) : "";
     std::snprintf(line, sizeof line, head, r.scene.c_str(), std::to_string(r.resolution).c_str(),
                   std::to_string(r.bodies).c_str(), std::to_string(r.steps).c_str(), toString(r.pipeline), strict.c_str(),
                   full.c_str(), pairs.c_str(), outside.c_str(), count(r.exact_tests_per_step).c_str(), flagged.c_str(),
-                  ms(r.collision_ms_median).c_str(), ms(r.step_ms_median).c_str(), ratio.c_str(),
+                  ms(r.collision_ms_mean).c_str(), ms(r.step_ms_mean).c_str(), ratio.c_str(),
                   fixed(r.max_penetration, 3).c_str(),
                   (r.diverged_at_step >= 0 ? "DIV@" + std::to_string(r.diverged_at_step)
                                            : std::to_string(r.penetration_steps)).c_str(),

@@ -90,7 +90,14 @@ PairKey pairOf(Index x, Index y) { return {std::min(x, y), std::max(x, y)}; }
 
 }  // namespace
 
-const char* toString(Pipeline p) { return p == Pipeline::Sensors ? "sensors" : "bullet"; }
+const char* toString(Pipeline p) {
+  switch (p) {
+    case Pipeline::Sensors: return "sensors";
+    case Pipeline::Bounds: return "bounds";
+    default: return "bullet";
+  }
+}
+const char* toString(FlaggingMode f) { return f == FlaggingMode::Thesis ? "thesis" : "default"; }
 const char* toString(TruthMode t) {
   switch (t) {
     case TruthMode::None: return "none";
@@ -108,6 +115,12 @@ double median(std::vector<double> v) {
   if (v.size() % 2) return hi;
   const double lo = *std::max_element(v.begin(), v.begin() + static_cast<long>(m));
   return 0.5 * (lo + hi);
+}
+
+double mean(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return v.empty() ? 0.0 : s / double(v.size());
 }
 
 bool resetPeakRss() {
@@ -132,8 +145,10 @@ double peakRssMb() {
   return static_cast<double>(ru.ru_maxrss) / 1024.0;
 }
 
-RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& opt) {
-  const auto run_start = Clock::now();
+namespace {
+
+/// What ran, before anything is measured.
+RunResult describeRun(const Scene& scene, Pipeline pipeline, const RunOptions& opt) {
   RunResult r;
   r.scene = scene.name;
   if (const SceneInfo* info = findScene(scene.name)) r.scene_number = info->number;
@@ -141,218 +156,266 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
   r.scale = scene.scale;
   r.note = scene.note;
   r.pipeline = pipeline;
+  if (pipeline == Pipeline::Sensors) r.flagging = toString(opt.flagging);
+  if (pipeline == Pipeline::Bounds) r.flagging = "bounds";
+  r.exact = pipeline == Pipeline::Bullet ? "bullet" : opt.exact;
   r.bodies = scene.bodies.size();
   r.resolution = scene.resolution();
   r.steps = opt.steps ? opt.steps : scene.default_steps;
   for (const SoftBodySpec& b : scene.bodies) r.vertices += b.mesh.vertices.size();
   r.has_strict = opt.truth == TruthMode::Strict || opt.truth == TruthMode::Both;
   r.has_full = opt.truth == TruthMode::Full || opt.truth == TruthMode::Both;
-  r.has_sensor_figures = pipeline == Pipeline::Sensors;
-  const std::size_t warmup = opt.warmup ? std::min(opt.warmup, r.steps - 1)
-                                        : std::min<std::size_t>(10, std::max<std::size_t>(1, r.steps / 10));
+  r.has_sensor_figures = pipeline != Pipeline::Bullet;
+  r.warmup = opt.warmup ? std::min(opt.warmup, r.steps - 1)
+                        : std::min<std::size_t>(10, std::max<std::size_t>(1, r.steps / 10));
+  return r;
+}
 
-  resetPeakRss();
+psc::Flagging coreFlagging(Pipeline pipeline, FlaggingMode mode) {
+  if (pipeline == Pipeline::Bounds) return psc::Flagging::Bounds;
+  return mode == FlaggingMode::Thesis ? psc::Flagging::Sensors : psc::Flagging::SensorsAndBounds;
+}
+
+/// One run in progress: the Bullet world with its pipeline, the instruments inside its step, the
+/// ground truth, and the frame series. Each step fills one StepRecord.
+class Run {
+ public:
+  Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool strict, bool full);
+
+  /// Steps the world once and fills `rec`: the step's times, and (from the hook after collision
+  /// detection) the contacts found and their comparison with the truth.
+  void step(StepRecord& rec);
+  /// A node position non-finite or 1000 scene extents out.
+  bool diverged();
+  /// After the step: vertices inside another closed body beyond the margins.
+  void measurePenetration(StepRecord& rec);
+  void writeFrame(std::size_t step);
+  bool writesFrame(std::size_t step) const {
+    return frames_ && step % std::max<std::size_t>(1, opt_.frame_every) == 0;
+  }
+  void finish() {
+    if (frames_) frames_->finish();
+  }
+  double midphaseBytesPerVertex(std::size_t vertices);
+
+ private:
+  /// In the hook after collision detection: positions are m_x (predicted) and m_q (previous),
+  /// exactly what CollideVF_SS used, and m_scontacts holds this step's contacts.
+  void afterCollision();
+  void compareWithTruth(StepRecord& rec);
+
+  const Scene& scene_;
+  Pipeline pipeline_;
+  const RunOptions& opt_;
+  SceneWorld world_;
+  std::unique_ptr<SensorPipeline> sensors_;
+  ZoneTimer zone_{"Deformable Collision"};
+  TruthSettings truth_settings_;
+  GroundTruth truth_;
+  const TruthResult* last_truth_ = nullptr;
+  TriangleGrid pen_grid_;
+  std::vector<TruthBody> bodies_;
+  std::vector<ContactKey> found_;
+  std::set<PairKey> truth_pairs_, found_pairs_;
+  std::unique_ptr<FrameSeries> frames_;
+  double far_out_ = 1.0;             ///< far enough out to mean the simulation blew up
+  StepRecord* current_ = nullptr;    ///< the record of the step under way
+  Clock::time_point detect_start_;
+};
+
+WorldOptions worldOptions(Pipeline pipeline) {
   WorldOptions wo;
-  if (pipeline == Pipeline::Sensors) {
+  if (pipeline != Pipeline::Bullet) {
     if (!SensorPipeline::available())
       throw Error(ErrorCode::InvalidArgument, "this psc_demo was built without psc::bullet: use --pipeline bullet");
     wo.soft_collision_flags = SensorPipeline::bodyCollisionFlags();
   }
-  SceneWorld sw(scene, wo);
-  std::unique_ptr<SensorPipeline> sensors;
-  if (pipeline == Pipeline::Sensors) sensors = std::make_unique<SensorPipeline>(sw);
-  ZoneTimer zone("Deformable Collision");
+  return wo;
+}
 
-  TruthSettings ts;
-  ts.strict = r.has_strict;
-  ts.full = r.has_full;
-  // Bullet decides in btScalar: a pair this close to the radius may go either way on rounding.
-  const double scalar_eps = std::numeric_limits<btScalar>::epsilon();
-  GroundTruth truth;
-  TriangleGrid pen_grid;
-  std::vector<TruthBody> bodies;
-  std::vector<ContactKey> found;
-  std::set<PairKey> truth_pairs, found_pairs;
-  const TruthResult* last_truth = nullptr;
-
-  double hook_ms = 0.0, detect_ms = 0.0;
-  Clock::time_point detect_start;
-  double worst_strict = 1.0, worst_full = 1.0;
-  std::size_t exact_total = 0, flagged_total = 0;
-  long rounds_total = 0;
-  std::vector<double> detect_per_step, refit_per_step, zone_per_step, sensor_per_step, exact_per_step;
-
-  // Measurement inside the step, where contacts were just decided: positions are m_x (predicted)
-  // and m_q (previous), exactly what CollideVF_SS used.
-  sw.world().before_collision = [&] {
-    zone.arm(true);
-    detect_start = Clock::now();
+Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool strict, bool full)
+    : scene_(scene), pipeline_(pipeline), opt_(opt), world_(scene, worldOptions(pipeline)) {
+  if (pipeline != Pipeline::Bullet)
+    sensors_ = std::make_unique<SensorPipeline>(world_, coreFlagging(pipeline, opt.flagging), opt.exact);
+  truth_settings_.strict = strict;
+  truth_settings_.full = full;
+  world_.world().before_collision = [this] {
+    zone_.arm(true);
+    detect_start_ = Clock::now();
   };
-  sw.world().after_collision = [&] {
-    zone.arm(false);
-    detect_ms = msSince(detect_start);
+  world_.world().after_collision = [this] {
+    zone_.arm(false);
+    current_->ms.detect = msSince(detect_start_);
     const auto h0 = Clock::now();
-    collectFound(sw, found);
-    r.contacts_found_total += found.size();
-    if (pipeline == Pipeline::Bullet) exact_total += countVFExactTests(sw.world());
-    if (opt.truth != TruthMode::None) {
-      const auto t0 = Clock::now();
-      extractBodies(sw, bodies, true);
-      ts.band_absolute = 16.0 * scalar_eps * coordinateScale(bodies);
-      const TruthResult& tr = truth.compute(bodies, ts);
-      last_truth = &tr;
-      r.truth_seconds += msSince(t0) / 1000.0;
-      std::size_t in_strict = 0, in_full = 0, outside = 0;
-      found_pairs.clear();
-      for (const ContactKey& k : found) {
-        found_pairs.insert(pairOf(k.vertex_body, k.triangle_body));
-        const TruthContact* c = tr.find(k);
-        if (c && c->strict == Membership::Inside) ++in_strict;
-        if (c && c->full == Membership::Inside) ++in_full;
-        if (r.has_full && (!c || c->full == Membership::Outside)) ++outside;
-      }
-      truth_pairs.clear();
-      for (const TruthContact& c : tr.contacts) {
-        if (c.strict == Membership::Inside) {
-          const TruthBody& tb = bodies[c.key.triangle_body];
-          const Triangle& t = tb.triangles[c.key.triangle];
-          const double cross2 = (tb.x[t[1]] - tb.x[t[0]]).cross(tb.x[t[2]] - tb.x[t[0]]).squaredNorm();
-          r.truth_strict_untestable += cross2 <= double(SIMD_EPSILON);
-        }
-        const Membership widest = r.has_full ? c.full : c.strict;
-        if (widest == Membership::Inside) truth_pairs.insert(pairOf(c.key.vertex_body, c.key.triangle_body));
-        r.truth_ambiguous += (c.strict == Membership::Ambiguous || c.full == Membership::Ambiguous);
-      }
-      for (const PairKey& p : truth_pairs) r.truth_pairs_found += found_pairs.count(p);
-      r.truth_pairs_total += truth_pairs.size();
-      r.truth_strict_total += tr.strict_inside;
-      r.truth_full_total += tr.full_inside;
-      r.found_in_strict += in_strict;
-      r.found_in_full += in_full;
-      r.contacts_outside_truth += outside;
-      if (tr.strict_inside) worst_strict = std::min(worst_strict, double(in_strict) / double(tr.strict_inside));
-      if (tr.full_inside) worst_full = std::min(worst_full, double(in_full) / double(tr.full_inside));
-    }
-    hook_ms += msSince(h0);
+    afterCollision();
+    current_->ms.hooks += msSince(h0);
   };
-
-  // Far enough out to mean the simulation blew up, not that a body bounced.
-  double far_out = 1.0;
   for (const SoftBodySpec& b : scene.bodies)
-    for (const Vec3& v : b.mesh.vertices) far_out = std::max(far_out, v.cwiseAbs().maxCoeff());
-  far_out *= 1000.0;
-
-  std::unique_ptr<FrameSeries> frames;
+    for (const Vec3& v : b.mesh.vertices) far_out_ = std::max(far_out_, v.cwiseAbs().maxCoeff());
+  far_out_ *= 1000.0;
   if (!opt.frames_dir.empty()) {
-    frames = std::make_unique<FrameSeries>(
+    frames_ = std::make_unique<FrameSeries>(
         opt.frames_dir, opt.frames_name.empty() ? scene.name + "_" + toString(pipeline) : opt.frames_name);
     std::vector<std::pair<Vec3, Vec3>> boxes;
     for (const StaticBoxSpec& b : scene.statics) boxes.emplace_back(b.center, b.half_extents);
-    frames->writeStatic(boxes);
+    frames_->writeStatic(boxes);
   }
+}
 
-  for (std::size_t step = 0; step < r.steps; ++step) {
-    hook_ms = 0.0;
-    detect_ms = 0.0;
-    const auto t0 = Clock::now();
-    sw.step();
-    const double step_ms = msSince(t0) - hook_ms;
-    const double refit_ms = sw.softSolver().lastFaceRefitMs();
-    double collision_ms = refit_ms;
-    const double zone_ms = zone.takeMs();
-    zone.takeCount();
-    SensorStepFigures f;
-    if (pipeline == Pipeline::Bullet) {
-      collision_ms += zone_ms;
-    } else {
-      f = sensors->takeStep();
-      collision_ms += f.ms_sensor + f.ms_exact + zone_ms;  // zone_ms: pairs handed back to Bullet
-      exact_total += f.exact_tests;
-      flagged_total += f.flagged_pairs;
-      rounds_total += f.rounds;
-      r.particles = std::max(r.particles, f.particles);
-      r.round_cap_hits += f.round_cap_hits;
-      r.repartitions += f.repartitions;
-      r.fallback_pairs += f.fallback_pairs;
-      if (r.pipeline_error.empty() && !f.error.empty()) r.pipeline_error = f.error;
-    }
-    if (step >= warmup) {
-      r.collision_ms_per_step.push_back(collision_ms);
-      r.step_ms_per_step.push_back(step_ms);
-      detect_per_step.push_back(detect_ms);
-      refit_per_step.push_back(refit_ms);
-      zone_per_step.push_back(zone_ms);
-      sensor_per_step.push_back(f.ms_sensor);
-      exact_per_step.push_back(f.ms_exact);
-    }
+void Run::step(StepRecord& rec) {
+  current_ = &rec;
+  const auto t0 = Clock::now();
+  world_.step();
+  rec.ms.step = msSince(t0) - rec.ms.hooks;
+  rec.ms.face_refit = world_.softSolver().lastFaceRefitMs();
+  rec.ms.traversal_exact = zone_.takeMs();  // ours: pairs handed back to Bullet
+  zone_.takeCount();
+  if (sensors_) sensors_->takeStep(rec);
+  current_ = nullptr;
+}
 
-    if (diverged(sw, far_out)) {
-      r.diverged_at_step = static_cast<long>(step);
-      r.steps = step + 1;
-      break;
-    }
+void Run::afterCollision() {
+  collectFound(world_, found_);
+  current_->n.contacts_found = found_.size();
+  if (pipeline_ == Pipeline::Bullet) current_->n.exact_tests = countVFExactTests(world_.world());
+  if (opt_.truth != TruthMode::None) compareWithTruth(*current_);
+}
 
-    // After the step: what the user sees. Vertices inside another closed body beyond the margins.
-    if (opt.penetration) {
-      extractBodies(sw, bodies, false);
-      const Penetration pen = measurePenetration(bodies, pen_grid);
-      if (pen.vertices) {
-        ++r.penetration_steps;
-        r.max_penetration = std::max(r.max_penetration, pen.max_depth);
-      }
+void Run::compareWithTruth(StepRecord& rec) {
+  // Bullet decides in btScalar: a pair this close to the radius may go either way on rounding.
+  const double scalar_eps = std::numeric_limits<btScalar>::epsilon();
+  const bool full = truth_settings_.full;
+  const auto t0 = Clock::now();
+  extractBodies(world_, bodies_, true);
+  truth_settings_.band_absolute = 16.0 * scalar_eps * coordinateScale(bodies_);
+  const TruthResult& tr = truth_.compute(bodies_, truth_settings_);
+  last_truth_ = &tr;
+  rec.ms.truth = msSince(t0);
+  StepCounts& n = rec.n;
+  found_pairs_.clear();
+  for (const ContactKey& k : found_) {
+    found_pairs_.insert(pairOf(k.vertex_body, k.triangle_body));
+    const TruthContact* c = tr.find(k);
+    if (c && c->strict == Membership::Inside) ++n.found_in_strict;
+    if (c && c->full == Membership::Inside) ++n.found_in_full;
+    if (full && (!c || c->full == Membership::Outside)) ++n.outside_truth;
+  }
+  truth_pairs_.clear();
+  for (const TruthContact& c : tr.contacts) {
+    if (c.strict == Membership::Inside) {
+      const TruthBody& tb = bodies_[c.key.triangle_body];
+      const Triangle& t = tb.triangles[c.key.triangle];
+      const double cross2 = (tb.x[t[1]] - tb.x[t[0]]).cross(tb.x[t[2]] - tb.x[t[0]]).squaredNorm();
+      n.truth_strict_untestable += cross2 <= double(SIMD_EPSILON);
     }
+    const Membership widest = full ? c.full : c.strict;
+    if (widest == Membership::Inside) truth_pairs_.insert(pairOf(c.key.vertex_body, c.key.triangle_body));
+    n.truth_ambiguous += (c.strict == Membership::Ambiguous || c.full == Membership::Ambiguous);
+  }
+  for (const PairKey& p : truth_pairs_) n.truth_pairs_found += found_pairs_.count(p);
+  n.truth_pairs = truth_pairs_.size();
+  n.truth_strict = tr.strict_inside;
+  n.truth_full = tr.full_inside;
+}
 
-    if (frames && step % std::max<std::size_t>(1, opt.frame_every) == 0) {
-      extractBodies(sw, bodies, false);
-      std::vector<FrameBody> fb(bodies.size());
-      SensorView view;
-      if (sensors) view = sensors->view();
-      for (std::size_t b = 0; b < bodies.size(); ++b) {
-        fb[b].x = bodies[b].x;
-        fb[b].triangles = &bodies[b].triangles;
-        fb[b].contact.assign(bodies[b].x.size(), 0);
-        fb[b].missed.assign(bodies[b].x.size(), 0);
-        if (sensors && b < view.region_of.size() && !view.region_of[b].empty()) {
-          fb[b].region = view.region_of[b];
-          fb[b].flagged.assign(bodies[b].x.size(), 0);
-          for (std::size_t v = 0; v < fb[b].region.size(); ++v) {
-            const auto reg = static_cast<std::size_t>(fb[b].region[v]);
-            fb[b].flagged[v] = reg < view.region_flagged[b].size() ? view.region_flagged[b][reg] : 0;
-          }
-        }
+bool Run::diverged() { return psc::demo::diverged(world_, far_out_); }
+
+void Run::measurePenetration(StepRecord& rec) {
+  extractBodies(world_, bodies_, false);
+  const Penetration pen = psc::demo::measurePenetration(bodies_, pen_grid_);
+  rec.n.penetrating_vertices = pen.vertices;
+  if (pen.vertices) rec.max_penetration = pen.max_depth;
+}
+
+void Run::writeFrame(std::size_t step) {
+  extractBodies(world_, bodies_, false);
+  std::vector<FrameBody> fb(bodies_.size());
+  SensorView view;
+  if (sensors_) view = sensors_->view();
+  for (std::size_t b = 0; b < bodies_.size(); ++b) {
+    fb[b].x = bodies_[b].x;
+    fb[b].triangles = &bodies_[b].triangles;
+    fb[b].contact.assign(bodies_[b].x.size(), 0);
+    fb[b].missed.assign(bodies_[b].x.size(), 0);
+    if (sensors_ && b < view.region_of.size() && !view.region_of[b].empty()) {
+      fb[b].region = view.region_of[b];
+      fb[b].flagged.assign(bodies_[b].x.size(), 0);
+      for (std::size_t v = 0; v < fb[b].region.size(); ++v) {
+        const auto reg = static_cast<std::size_t>(fb[b].region[v]);
+        fb[b].flagged[v] = reg < view.region_flagged[b].size() ? view.region_flagged[b][reg] : 0;
       }
-      const auto markTriangle = [&](std::vector<char> FrameBody::*member, Index body, Index tri) {
-        for (Index v : bodies[body].triangles[tri]) (fb[body].*member)[v] = 1;
-      };
-      for (const ContactKey& k : found) {
-        fb[k.vertex_body].contact[k.vertex] = 1;
-        markTriangle(&FrameBody::contact, k.triangle_body, k.triangle);
-      }
-      if (last_truth) {
-        // Truth contacts of this step's collision pass (strict if asked, else full) not found.
-        for (const TruthContact& c : last_truth->contacts) {
-          const Membership m = r.has_strict ? c.strict : c.full;
-          if (m != Membership::Inside || std::binary_search(found.begin(), found.end(), c.key)) continue;
-          fb[c.key.vertex_body].missed[c.key.vertex] = 1;
-          markTriangle(&FrameBody::missed, c.key.triangle_body, c.key.triangle);
-        }
-      }
-      if (!sensors)
-        for (std::size_t b = 0; b < fb.size(); ++b) fb[b].flagged = fb[b].contact;
-      std::vector<FrameParticle> parts;
-      for (const auto& p : view.particles) {
-        FrameParticle fp;
-        fp.x = bodies[p.body].x[p.vertex];
-        fp.body = static_cast<int>(p.body);
-        fp.region = static_cast<int>(p.region);
-        fp.flagged = p.region < view.region_flagged[p.body].size() && view.region_flagged[p.body][p.region];
-        parts.push_back(fp);
-      }
-      frames->writeFrame(step, static_cast<double>(step + 1) * scene.dt, fb, parts);
     }
   }
-  if (frames) frames->finish();
+  const auto markTriangle = [&](std::vector<char> FrameBody::*member, Index body, Index tri) {
+    for (Index v : bodies_[body].triangles[tri]) (fb[body].*member)[v] = 1;
+  };
+  for (const ContactKey& k : found_) {
+    fb[k.vertex_body].contact[k.vertex] = 1;
+    markTriangle(&FrameBody::contact, k.triangle_body, k.triangle);
+  }
+  if (last_truth_) {
+    // Truth contacts of this step's collision pass (strict if asked, else full) not found.
+    for (const TruthContact& c : last_truth_->contacts) {
+      const Membership m = truth_settings_.strict ? c.strict : c.full;
+      if (m != Membership::Inside || std::binary_search(found_.begin(), found_.end(), c.key)) continue;
+      fb[c.key.vertex_body].missed[c.key.vertex] = 1;
+      markTriangle(&FrameBody::missed, c.key.triangle_body, c.key.triangle);
+    }
+  }
+  if (!sensors_)
+    for (std::size_t b = 0; b < fb.size(); ++b) fb[b].flagged = fb[b].contact;
+  std::vector<FrameParticle> parts;
+  for (const auto& p : view.particles) {
+    FrameParticle fp;
+    fp.x = bodies_[p.body].x[p.vertex];
+    fp.body = static_cast<int>(p.body);
+    fp.region = static_cast<int>(p.region);
+    fp.flagged = p.region < view.region_flagged[p.body].size() && view.region_flagged[p.body][p.region];
+    parts.push_back(fp);
+  }
+  frames_->writeFrame(step, static_cast<double>(step + 1) * scene_.dt, fb, parts);
+}
 
+double Run::midphaseBytesPerVertex(std::size_t vertices) {
+  if (sensors_) return sensors_->midphaseBytesPerVertex();
+  std::size_t bytes = 0;
+  for (btSoftBody* b : world_.softBodies()) bytes += bulletMidphaseBytes(*b);
+  return vertices ? double(bytes) / double(vertices) : 0.0;
+}
+
+/// Counts over every step run, recall over them, and the worst step.
+void summariseCounts(RunResult& r) {
+  double worst_strict = 1.0, worst_full = 1.0;
+  std::size_t exact_total = 0, flagged_total = 0;
+  long rounds_total = 0;
+  for (const StepRecord& rec : r.per_step) {
+    const StepCounts& n = rec.n;
+    r.contacts_found_total += n.contacts_found;
+    exact_total += n.exact_tests;
+    flagged_total += n.flagged_pairs;
+    rounds_total += n.rounds;
+    r.particles = std::max(r.particles, n.particles);
+    r.round_cap_hits += n.round_cap_hits;
+    r.repartitions += n.repartitions;
+    r.fallback_pairs += n.fallback_pairs;
+    if (r.pipeline_error.empty() && !rec.error.empty()) r.pipeline_error = rec.error;
+    r.truth_strict_total += n.truth_strict;
+    r.truth_full_total += n.truth_full;
+    r.found_in_strict += n.found_in_strict;
+    r.found_in_full += n.found_in_full;
+    r.contacts_outside_truth += n.outside_truth;
+    r.truth_pairs_total += n.truth_pairs;
+    r.truth_pairs_found += n.truth_pairs_found;
+    r.truth_ambiguous += n.truth_ambiguous;
+    r.truth_strict_untestable += n.truth_strict_untestable;
+    r.truth_seconds += rec.ms.truth / 1000.0;
+    if (n.truth_strict) worst_strict = std::min(worst_strict, double(n.found_in_strict) / double(n.truth_strict));
+    if (n.truth_full) worst_full = std::min(worst_full, double(n.found_in_full) / double(n.truth_full));
+    if (n.penetrating_vertices) {
+      ++r.penetration_steps;
+      r.max_penetration = std::max(r.max_penetration, rec.max_penetration);
+    }
+  }
   const double steps = static_cast<double>(r.steps);
   r.recall_strict = r.truth_strict_total ? double(r.found_in_strict) / double(r.truth_strict_total) : 1.0;
   r.recall_full = r.truth_full_total ? double(r.found_in_full) / double(r.truth_full_total) : 1.0;
@@ -365,27 +428,63 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
   r.exact_tests_per_step = double(exact_total) / steps;
   r.flagged_pairs_per_step = double(flagged_total) / steps;
   r.rounds_per_step = double(rounds_total) / steps;
-  r.collision_ms_median = median(r.collision_ms_per_step);
-  r.step_ms_median = median(r.step_ms_per_step);
-  const auto mean = [](const std::vector<double>& v) {
-    double s = 0;
-    for (double x : v) s += x;
-    return v.empty() ? 0.0 : s / double(v.size());
-  };
-  r.collision_ms_mean = mean(r.collision_ms_per_step);
-  r.step_ms_mean = mean(r.step_ms_per_step);
-  r.detect_ms_median = median(detect_per_step);
-  r.face_refit_ms_median = median(refit_per_step);
-  r.zone_ms_median = median(zone_per_step);
-  r.sensor_step_ms_median = median(sensor_per_step);
-  r.exact_stage_ms_median = median(exact_per_step);
-  if (sensors) {
-    r.midphase_bytes_per_vertex = sensors->midphaseBytesPerVertex();
-  } else {
-    std::size_t bytes = 0;
-    for (btSoftBody* b : sw.softBodies()) bytes += bulletMidphaseBytes(*b);
-    r.midphase_bytes_per_vertex = r.vertices ? double(bytes) / double(r.vertices) : 0.0;
+}
+
+/// Times over the timed steps (after the warm-up): means, medians, maxima, and the collision
+/// median over the timed steps that found a contact.
+void summariseTimes(RunResult& r) {
+  static constexpr double StepTimes::*kParts[] = {
+      &StepTimes::step,        &StepTimes::hooks,    &StepTimes::truth,      &StepTimes::detect,
+      &StepTimes::face_refit,  &StepTimes::traversal_exact, &StepTimes::sensor_step, &StepTimes::exact,
+      &StepTimes::particle,    &StepTimes::refit,    &StepTimes::flagging,   &StepTimes::candidates,
+      &StepTimes::repartition, &StepTimes::core_total};
+  const std::size_t first = std::min(r.warmup, r.per_step.size());
+  r.timed_steps = r.per_step.size() - first;
+  std::vector<double> collision, collision_contact, part;
+  for (std::size_t i = first; i < r.per_step.size(); ++i) {
+    collision.push_back(r.per_step[i].ms.collision());
+    if (r.per_step[i].n.contacts_found) collision_contact.push_back(collision.back());
+    r.collision_ms_max = std::max(r.collision_ms_max, collision.back());
+    r.step_ms_max = std::max(r.step_ms_max, r.per_step[i].ms.step);
   }
+  for (double StepTimes::*member : kParts) {
+    part.clear();
+    for (std::size_t i = first; i < r.per_step.size(); ++i) part.push_back(r.per_step[i].ms.*member);
+    r.stage_ms_mean.*member = mean(part);
+    r.stage_ms_median.*member = median(part);
+  }
+  r.collision_ms_mean = mean(collision);
+  r.collision_ms_median = median(collision);
+  r.collision_ms_contact_median = median(collision_contact);
+  r.contact_steps_timed = collision_contact.size();
+  r.step_ms_mean = r.stage_ms_mean.step;
+  r.step_ms_median = r.stage_ms_median.step;
+}
+
+}  // namespace
+
+RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& opt) {
+  const auto run_start = Clock::now();
+  RunResult r = describeRun(scene, pipeline, opt);
+  resetPeakRss();
+  Run run(scene, pipeline, opt, r.has_strict, r.has_full);
+  r.per_step.reserve(r.steps);
+  for (std::size_t step = 0; step < r.steps; ++step) {
+    r.per_step.emplace_back();
+    StepRecord& rec = r.per_step.back();
+    run.step(rec);
+    if (run.diverged()) {
+      r.diverged_at_step = static_cast<long>(step);
+      r.steps = step + 1;
+      break;
+    }
+    if (opt.penetration) run.measurePenetration(rec);
+    if (run.writesFrame(step)) run.writeFrame(step);
+  }
+  run.finish();
+  summariseCounts(r);
+  summariseTimes(r);
+  r.midphase_bytes_per_vertex = run.midphaseBytesPerVertex(r.vertices);
   r.peak_rss_mb = peakRssMb();
   r.wall_seconds = msSince(run_start) / 1000.0;
   return r;

@@ -1,21 +1,32 @@
 // One run: a scene simulated for S steps by one pipeline, measured against the ground truth.
 //
-// Collision ms (one definition for both pipelines): the wall time a step spends finding soft-soft
-// contacts, excluding what both pipelines pay identically.
+// Pipelines: `sensors` (psc::bullet, the default Flagging::SensorsAndBounds, or with
+// --flagging thesis the thesis's flag-only Flagging::Sensors), `bounds` (the same plugin pipeline
+// with Flagging::Bounds: the sensor stage switched off, boxes only; the ablation) and `bullet`
+// (Bullet's own VF_SS path).
+//
+// Collision ms (one definition for every pipeline, StepTimes::collision()): the wall time a step
+// spends finding soft-soft contacts, excluding what all pipelines pay identically.
 //   bullet  = face-tree refit (split out of btSoftBody::predictMotion by TimedSoftBodySolver;
 //             the tree only exists because of VF_SS)
 //           + the BT_PROFILE zone "Deformable Collision" during collision detection
 //             (btSoftBody::defaultCollisionHandler: node-tree vs face-tree traversal + every
 //             CollideVF_SS exact test, both directions, all soft-soft pairs)
-//   sensors = the plugin's sensor step (body sync + SensorWorld::step(): particle movement,
-//             flagging, candidate sets) + its exact stage (CollideVF_SS on the candidates)
-//           + the face-tree refit if any body still had one (normally 0: no VF_SS)
-// Excluded from both: the node-tree refit in predictMotion (Bullet always does it; soft-rigid
+//   sensors, bounds
+//           = the plugin's sensor step (body sync + SensorWorld::step(): particle movement, box
+//             refit, flagging, candidate sets, repartitioning) + its exact stage (CollideVF_SS on
+//             the candidates)
+//           + the face-tree refit and the zone if any body or pair was still left to Bullet
+//             (normally 0: no VF_SS)
+// Excluded from all: the node-tree refit in predictMotion (Bullet always does it; soft-rigid
 // uses that tree), broadphase, soft-rigid collision, the solvers.
 // Step ms: wall time of stepSimulation minus the time the measurement hooks took inside it.
+// Times are summarised over the timed steps (after the warm-up): means, medians, and the median
+// over the timed steps in which the pipeline found at least one soft-soft contact.
 #pragma once
 
 #include "scenes.h"
+#include "step_record.h"
 
 #include <cstdint>
 #include <functional>
@@ -24,11 +35,15 @@
 
 namespace psc::demo {
 
-enum class Pipeline { Sensors, Bullet };
+enum class Pipeline { Sensors, Bounds, Bullet };
 enum class TruthMode { None, Strict, Full, Both };
+/// The sensors pipeline's flagging: Default = Flagging::SensorsAndBounds, Thesis =
+/// Flagging::Sensors (flag-only, thesis §3.5). The bounds pipeline is always Flagging::Bounds.
+enum class FlaggingMode { Default, Thesis };
 
 const char* toString(Pipeline p);
 const char* toString(TruthMode t);
+const char* toString(FlaggingMode f);
 
 struct RunOptions {
   std::size_t steps = 0;         ///< 0 = the scene's default
@@ -37,15 +52,20 @@ struct RunOptions {
   std::string frames_dir;        ///< write a VTK series here; empty = none
   std::string frames_name;       ///< file stem of the series; empty = <scene>_<pipeline>
   std::size_t frame_every = 1;   ///< write every n-th step
-  std::size_t warmup = 0;        ///< steps left out of the medians; 0 = min(10, max(1, steps/10))
+  std::size_t warmup = 0;        ///< steps left out of the timing; 0 = min(10, max(1, steps/10))
+  FlaggingMode flagging = FlaggingMode::Default;  ///< for the sensors pipeline
+  std::string exact = "bullet";  ///< the sensors' exact test: bullet, robust or continuous (psc::bullet::ExactTest)
 };
 
-/// Everything a run measured. Fields that do not apply are flagged by the has_* members.
+/// Everything a run measured, summarised from its per-step records. Fields that do not apply are
+/// flagged by the has_* members.
 struct RunResult {
   std::string scene, scene_number, title, note;
   std::string series = "scenes";  ///< which group of runs: "scenes", "sweep_resolution", "sweep_bodies"
   std::size_t resolution = 0, bodies = 0, steps = 0, vertices = 0;
   Pipeline pipeline = Pipeline::Bullet;
+  std::string flagging;           ///< ours: "default", "thesis" or "bounds"; empty for Bullet's
+  std::string exact = "bullet";   ///< exact test of the run (Bullet's own pipeline: always bullet)
   bool has_strict = false, has_full = false;
   double recall_strict = 1.0, recall_full = 1.0;
   double recall_strict_worst_step = 1.0, recall_full_worst_step = 1.0;
@@ -61,7 +81,7 @@ struct RunResult {
   std::size_t contacts_outside_truth = 0;  ///< only with the full truth
   std::size_t truth_pairs_total = 0, truth_pairs_found = 0;
   double exact_tests_per_step = 0.0;
-  bool has_sensor_figures = false;
+  bool has_sensor_figures = false;         ///< our pipelines (sensors, bounds)
   double flagged_pairs_per_step = 0.0;
   double rounds_per_step = 0.0;
   std::size_t particles = 0;
@@ -69,13 +89,15 @@ struct RunResult {
   std::size_t repartitions = 0;
   std::size_t fallback_pairs = 0;
   std::string pipeline_error;              ///< first error the plugin reported, if any
-  double collision_ms_median = 0.0, step_ms_median = 0.0;
+  // Timing, over the timed steps (per_step[warmup...]).
+  std::size_t warmup = 0;                  ///< steps left out of the timing
+  std::size_t timed_steps = 0;
+  std::size_t contact_steps_timed = 0;     ///< timed steps with at least one soft-soft contact found
   double collision_ms_mean = 0.0, step_ms_mean = 0.0;
-  double detect_ms_median = 0.0;           ///< whole performDiscreteCollisionDetection (cross-check)
-  double face_refit_ms_median = 0.0;
-  /// The parts of collision ms, medians over the timed steps: Bullet's tree traversal + exact
-  /// tests (the profile zone); the plugin's sensor step and its exact stage.
-  double zone_ms_median = 0.0, sensor_step_ms_median = 0.0, exact_stage_ms_median = 0.0;
+  double collision_ms_median = 0.0, step_ms_median = 0.0;
+  double collision_ms_contact_median = 0.0;  ///< over the contact_steps_timed; 0 when there are none
+  double collision_ms_max = 0.0, step_ms_max = 0.0;
+  StepTimes stage_ms_mean, stage_ms_median;  ///< every part of StepTimes, mean and median
   double max_penetration = 0.0;
   std::size_t penetration_steps = 0;
   /// First step after which a node position was non-finite or absurdly far out (1000 scene
@@ -83,10 +105,11 @@ struct RunResult {
   long diverged_at_step = -1;
   double peak_rss_mb = 0.0;
   double midphase_bytes_per_vertex = 0.0;
-  double ratio_bullet_over_sensors = 0.0;  ///< collision ms, filled when both pipelines ran
+  /// Collision ms means of the runs of the same job, filled by the suite when both ran (0 = not).
+  double ratio_bullet_over_sensors = 0.0, ratio_bullet_over_bounds = 0.0, ratio_bounds_over_sensors = 0.0;
   double wall_seconds = 0.0;               ///< whole run incl. truth and output
   double truth_seconds = 0.0;
-  std::vector<double> collision_ms_per_step, step_ms_per_step;
+  std::vector<StepRecord> per_step;        ///< every step run, warm-up included
 };
 
 /// Builds the world for `pipeline` from `scene`, steps it and measures. Throws psc::Error when the
@@ -99,5 +122,6 @@ double peakRssMb();
 bool resetPeakRss();
 
 double median(std::vector<double> v);
+double mean(const std::vector<double>& v);
 
 }  // namespace psc::demo

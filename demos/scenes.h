@@ -1,4 +1,4 @@
-// The benchmark's scenes (BENCHMARK.md "Scenes"): one definition used by psc_demo, the benchmark
+// The benchmark's scenes (docs/BENCHMARK.md, "Scenes"): one definition used by psc_demo, the benchmark
 // and the tests. A Scene is plain geometry and material data, independent of Bullet and of the
 // midphase; bullet_scene.h turns it into a btSoftRigidDynamicsWorld. Lengths in scene units
 // (a "unit" sphere has radius 1), masses in kg, times in seconds.
@@ -66,14 +66,14 @@ struct Scene {
 /// One row of the catalogue (--list-scenes).
 struct SceneInfo {
   std::string name;
-  std::string number;          ///< BENCHMARK.md's numbering: "1", "2a", "2b", ... "8"
+  std::string number;          ///< docs/BENCHMARK.md's numbering: "1", "2a", "2b", ... "8"
   std::string summary;
   bool takes_body_count = false;
   std::size_t default_bodies = 2;
   std::size_t default_steps = 120;
 };
 
-/// All scenes, in BENCHMARK.md order.
+/// All scenes, in docs/BENCHMARK.md's order.
 const std::vector<SceneInfo>& sceneCatalog();
 
 /// The catalogue row for a name or a number ("head_on", "1", "2b"); nullptr when unknown.

@@ -23,9 +23,11 @@ bool SensorPipeline::available() { return true; }
 
 int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
 
-SensorPipeline::SensorPipeline(SceneWorld& world) {
+SensorPipeline::SensorPipeline(SceneWorld& world, psc::Flagging flagging, const std::string& exact) {
   psc::bullet::Settings settings;
   settings.opt_in = psc::bullet::OptIn::Explicit;
+  settings.sensors.flagging = flagging;
+  settings.exact = psc::bullet::exactTestFromString(exact);
   impl_ = std::make_shared<Impl>(world, psc::bullet::install(world.world(), settings));
   for (btSoftBody* body : world.softBodies()) impl_->plugin.setEnabled(body, true);
   // The world destroys its attachments before its bodies and itself: the plugin must go first.
@@ -34,25 +36,30 @@ SensorPipeline::SensorPipeline(SceneWorld& world) {
 
 SensorPipeline::~SensorPipeline() = default;
 
-SensorStepFigures SensorPipeline::takeStep() {
-  SensorStepFigures f;
+void SensorPipeline::takeStep(StepRecord& record) {
   const psc::bullet::Stats& s = impl_->plugin.stats();
-  f.fallback_pairs = s.fallback_pairs;
-  if (s.sensor_steps == impl_->last_sensor_steps) return f;  // no soft-soft pair this step
+  record.n.fallback_pairs = s.fallback_pairs;
+  if (s.sensor_steps == impl_->last_sensor_steps) return;  // no soft-soft pair this step
   impl_->last_sensor_steps = s.sensor_steps;
-  f.stepped = true;
-  f.particles = s.particles;
-  f.rounds = s.rounds;
-  f.round_cap_hits = s.round_cap_hits;
-  f.flagged_pairs = s.flagged_pairs;
-  f.candidate_pairs = s.candidate_pairs;
-  f.exact_tests = s.exact_tests;
-  f.contacts = s.contacts;
-  f.repartitions = s.repartitions;
-  f.ms_sensor = s.ms_sensor_step;
-  f.ms_exact = s.ms_exact;
-  f.error = s.error.empty() ? s.skipped_reason : s.error;
-  return f;
+  StepCounts& n = record.n;
+  n.sensed = true;
+  n.particles = s.particles;
+  n.rounds = s.rounds;
+  n.round_cap_hits = s.round_cap_hits;
+  n.flagged_pairs = s.flagged_pairs;
+  n.candidate_pairs = s.candidate_pairs;
+  n.exact_tests = s.exact_tests;
+  n.repartitions = s.repartitions;
+  StepTimes& ms = record.ms;
+  ms.sensor_step = s.ms_sensor_step;
+  ms.exact = s.ms_exact;
+  ms.particle = s.core.ms_sensors;
+  ms.refit = s.core.ms_refit;
+  ms.flagging = s.core.ms_flagging;
+  ms.candidates = s.core.ms_candidates;
+  ms.repartition = s.core.ms_repartition;
+  ms.core_total = s.core.ms_total;
+  record.error = s.error.empty() ? s.skipped_reason : s.error;
 }
 
 double SensorPipeline::midphaseBytesPerVertex() const {
@@ -109,11 +116,11 @@ SensorView SensorPipeline::view() const {
 struct SensorPipeline::Impl {};
 bool SensorPipeline::available() { return false; }
 int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
-SensorPipeline::SensorPipeline(SceneWorld&) {
+SensorPipeline::SensorPipeline(SceneWorld&, psc::Flagging, const std::string&) {
   throw Error(ErrorCode::InvalidArgument, "this psc_demo was built without psc::bullet: use --pipeline bullet");
 }
 SensorPipeline::~SensorPipeline() = default;
-SensorStepFigures SensorPipeline::takeStep() { return {}; }
+void SensorPipeline::takeStep(StepRecord&) {}
 double SensorPipeline::midphaseBytesPerVertex() const { return 0.0; }
 SensorView SensorPipeline::view() const { return {}; }
 

@@ -5,30 +5,14 @@
 #pragma once
 
 #include "bullet_scene.h"
+#include "psc/settings.h"
+#include "step_record.h"
 
 #include <memory>
 #include <string>
 #include <vector>
 
 namespace psc::demo {
-
-/// The plugin's figures for one simulation step (zero when it did not run the sensors this step,
-/// i.e. Bullet dispatched no soft-soft pair).
-struct SensorStepFigures {
-  bool stepped = false;
-  std::size_t particles = 0;
-  int rounds = 0;
-  std::size_t round_cap_hits = 0;
-  std::size_t flagged_pairs = 0;
-  std::size_t candidate_pairs = 0;
-  std::size_t exact_tests = 0;
-  std::size_t contacts = 0;
-  std::size_t repartitions = 0;
-  std::size_t fallback_pairs = 0;  ///< pairs the plugin handed back to Bullet's algorithm
-  double ms_sensor = 0.0;          ///< sensor step incl. candidate sets, wall clock
-  double ms_exact = 0.0;           ///< exact stage (CollideVF_SS on the candidates), wall clock
-  std::string error;
-};
 
 /// What a frame shows of the sensors.
 struct SensorView {
@@ -48,11 +32,17 @@ class SensorPipeline {
   /// m_cfg.collisions for bodies of the sensor world: soft-rigid as usual, no VF_SS.
   static int bodyCollisionFlags();
 
-  explicit SensorPipeline(SceneWorld& world);
+  /// `flagging` goes to Settings::sensors.flagging: SensorsAndBounds (the default), Bounds (the
+  /// ablation: boxes only) or Sensors (the thesis's flag-only mode). `exact`: the plugin's exact
+  /// test, "bullet", "robust" or "continuous" (psc::bullet::ExactTest); anything else throws
+  /// psc::Error(InvalidArgument).
+  explicit SensorPipeline(SceneWorld& world, psc::Flagging flagging = psc::Flagging::SensorsAndBounds,
+                          const std::string& exact = "bullet");
   ~SensorPipeline();
 
-  /// Figures of the step that just ended.
-  SensorStepFigures takeStep();
+  /// Adds the plugin's figures of the step that just ended to `record` (times and counts stay 0
+  /// when the plugin did not run its sensor step, i.e. Bullet dispatched no soft-soft pair).
+  void takeStep(StepRecord& record);
   /// Bytes the core keeps for all bodies (topology, regions, particles), per vertex of the scene.
   double midphaseBytesPerVertex() const;
   SensorView view() const;

@@ -4,6 +4,7 @@
 #include "psc/error.h"
 #include "report.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -39,8 +40,8 @@ double units(const Scene& s, std::size_t steps, std::size_t pipelines) {
 }
 
 std::string summary(const RunResult& r) {
-  std::string s = std::string(toString(r.pipeline)) + ": " + fmt("%.3g", r.collision_ms_median) + " ms coll, " +
-                  fmt("%.3g", r.step_ms_median) + " ms step";
+  std::string s = std::string(toString(r.pipeline)) + ": " + fmt("%.3g", r.collision_ms_mean) + " ms coll, " +
+                  fmt("%.3g", r.step_ms_mean) + " ms step (means)";
   if (r.has_strict) s += ", strict " + fmt("%.4f", r.recall_strict);
   if (r.has_strict && r.truth_strict_untestable)
     s += " (" + fmt("%.4f", r.recall_strict_testable) + " without " + std::to_string(r.truth_strict_untestable) +
@@ -49,6 +50,22 @@ std::string summary(const RunResult& r) {
   if (r.penetration_steps) s += ", penetration " + fmt("%.3f", r.max_penetration);
   if (r.diverged_at_step >= 0) s += ", DIVERGED after step " + std::to_string(r.diverged_at_step);
   return s;
+}
+
+/// Collision-time ratios (means) between the runs of one job, written into every run of it.
+void setRatios(std::vector<RunResult>& job_runs) {
+  const auto collisionMean = [&](Pipeline p) {
+    for (const RunResult& r : job_runs)
+      if (r.pipeline == p) return r.collision_ms_mean;
+    return 0.0;
+  };
+  const double sensors = collisionMean(Pipeline::Sensors), bounds = collisionMean(Pipeline::Bounds),
+               bullet = collisionMean(Pipeline::Bullet);
+  for (RunResult& r : job_runs) {
+    if (sensors > 0 && bullet > 0) r.ratio_bullet_over_sensors = bullet / sensors;
+    if (bounds > 0 && bullet > 0) r.ratio_bullet_over_bounds = bullet / bounds;
+    if (sensors > 0 && bounds > 0) r.ratio_bounds_over_sensors = bounds / sensors;
+  }
 }
 
 }  // namespace
@@ -76,6 +93,7 @@ std::vector<Job> defaultSuite() {
 
 SuiteOptions defaultSuiteOptions() {
   SuiteOptions o;
+  o.pipelines = {Pipeline::Sensors, Pipeline::Bounds, Pipeline::Bullet};
   o.json = "results/demo.json";
   o.csv = "results/demo.csv";
   o.plot_dir = "results/plots";
@@ -111,7 +129,7 @@ int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ost
                << duration(remaining * seconds_per_unit) << ")\n";
       if (!scene.note.empty()) progress << "      " << scene.note << "\n";
       progress.flush();
-      std::vector<RunResult> pair;
+      std::vector<RunResult> job_runs;
       for (Pipeline p : options.pipelines) {
         RunOptions ro = options.run;
         ro.steps = steps;
@@ -123,16 +141,10 @@ int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ost
         r.series = job.series;
         progress << "      " << summary(r) << "\n";
         progress.flush();
-        pair.push_back(std::move(r));
+        job_runs.push_back(std::move(r));
       }
-      const RunResult* s = nullptr;
-      const RunResult* b = nullptr;
-      for (const RunResult& r : pair) (r.pipeline == Pipeline::Sensors ? s : b) = &r;
-      if (s && b && s->collision_ms_median > 0) {
-        const double ratio = b->collision_ms_median / s->collision_ms_median;
-        for (RunResult& r : pair) r.ratio_bullet_over_sensors = ratio;
-      }
-      for (RunResult& r : pair) results.push_back(std::move(r));
+      setRatios(job_runs);
+      for (RunResult& r : job_runs) results.push_back(std::move(r));
       const double took = std::chrono::duration<double>(Clock::now() - job_start).count();
       done_units += u;
       done_seconds += took;
@@ -147,8 +159,13 @@ int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ost
 
   out << "\n" << machineLine(machine) << "\n";
   out << "recall: found ∩ truth / truth over all steps, then the worst step; pairs: body pairs in contact that got a "
-         "contact;\ncoll ms: soft-soft collision time per step (median after warm-up); B/ours: Bullet's coll ms over the "
-         "sensors'; max pen: deepest vertex inside another closed body beyond the margins\n\n";
+         "contact;\ncoll ms, step ms: soft-soft collision time and whole step per step (means after warm-up); B/ours: "
+         "Bullet's coll ms over this run's; bounds: the sensors pipeline with its sensor stage off (boxes only);\nmax "
+         "pen: deepest vertex inside another closed body beyond the margins\n";
+  if (options.run.flagging == FlaggingMode::Thesis &&
+      std::find(options.pipelines.begin(), options.pipelines.end(), Pipeline::Sensors) != options.pipelines.end())
+    out << "sensors runs: --flagging thesis (Flagging::Sensors, the thesis's flag-only mode)\n";
+  out << "\n";
   printTable(out, results);
   out << "\nsuite time " << duration(total) << "\n";
   try {

@@ -33,16 +33,26 @@ RegionLists buildRegionLists(const MeshTopology& topology, const std::vector<Ind
 struct ChunkLists {
   IndexRows vertices;         ///< own vertices of each chunk
   IndexRows triangles;        ///< triangles owned by each chunk
-  IndexRows box_vertices;     ///< own vertices ∪ vertices of owned triangles: what the box covers
   std::vector<Index> region_begin;  ///< chunks of region r are [region_begin[r], region_begin[r+1])
+  std::vector<Index> region_of;     ///< region of each chunk
+  /// The refit streams through the vertices in index order (the positions' memory order):
+  std::vector<Index> chunk_of;      ///< chunk owning each vertex (kInvalidIndex: in no triangle)
+  IndexRows foreign_of;             ///< per vertex, the other chunks whose owned triangles it is in
   std::size_t count() const { return vertices.rows(); }
   std::size_t bytes() const {
-    return vertices.bytes() + triangles.bytes() + box_vertices.bytes() + region_begin.capacity() * sizeof(Index);
+    return vertices.bytes() + triangles.bytes() + foreign_of.bytes() +
+           (region_begin.capacity() + region_of.capacity() + chunk_of.capacity()) * sizeof(Index);
   }
 };
 
 ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positions,
                        const std::vector<Index>& region_of, std::size_t regions, std::size_t chunk_vertices);
+
+/// Shape figures measured during a refit (Body::shape): what the repartition check needs.
+struct ShapeFigures {
+  std::vector<double> region_area;  ///< area of the triangles owned by each region's chunks
+  double max_edge = 0.0;            ///< longest triangle edge
+};
 
 /// Axis-aligned box with the largest vertex motion inside it.
 struct MotionBox {
@@ -50,6 +60,14 @@ struct MotionBox {
   Vec3 hi = Vec3::Zero();
   double motion = 0.0;
 };
+
+/// The order of StepResult::flagged: (body_a, region_a, body_b, region_b).
+inline bool flaggedLess(const FlaggedPair& a, const FlaggedPair& b) {
+  if (a.body_a != b.body_a) return a.body_a < b.body_a;
+  if (a.region_a != b.region_a) return a.region_a < b.region_a;
+  if (a.body_b != b.body_b) return a.body_b < b.body_b;
+  return a.region_b < b.region_b;
+}
 
 struct Body {
   BodyId id = kInvalidBody;
@@ -73,7 +91,6 @@ struct Body {
   double mean_edge = 0.0;              ///< at (re)partitioning: μ's geometric base
   double max_edge = 0.0;               ///< at (re)partitioning: the stretch trigger's base
   double area_star = 0.0;              ///< A*: largest region area at (re)partitioning
-  double diameter = 0.0;               ///< bounding diameter at (re)partitioning
   std::size_t repartitions = 0;
   int steps_since_check = 0;
 
@@ -82,6 +99,7 @@ struct Body {
   std::vector<MotionBox> chunk_box;
   std::vector<MotionBox> region_box;
   MotionBox body_box;
+  ShapeFigures shape;  ///< filled by refitBounds(b, true)
 
   std::string label() const { return name.empty() ? "body #" + std::to_string(id) : "body '" + name + "'"; }
   std::size_t regionCount() const { return particle_vertex.size(); }

@@ -3,7 +3,9 @@
 #include "psc/error.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <limits>
 
 namespace psc::detail {
 
@@ -22,61 +24,99 @@ void grow(MotionBox& into, const MotionBox& b) {
   into.motion = std::max(into.motion, b.motion);
 }
 
-// Boxes grown by ga and gb overlap.
-bool overlap(const MotionBox& a, double ga, const MotionBox& b, double gb) {
-  const double g = ga + gb;
-  return (a.lo.array() <= b.hi.array() + g).all() && (b.lo.array() <= a.hi.array() + g).all();
+/// A box grown by the contact reach of what it holds: its body's margin plus the motion term of
+/// its fastest vertex. Two boxes whose grown versions do not overlap hold no pair within
+/// margin_A + margin_B + motion_factor·|Δx| of each other, in either direction.
+struct Grown {
+  Vec3 lo, hi;
+  double g;
+};
+
+Grown grown(const MotionBox& b, double margin, double motion_factor) {
+  const double g = margin + motion_factor * b.motion;
+  return {b.lo.array() - g, b.hi.array() + g, g};
+}
+
+bool overlap(const Grown& a, const Grown& b) {
+  return (a.lo.array() <= b.hi.array()).all() && (b.lo.array() <= a.hi.array()).all();
 }
 
 bool inside(const Vec3& x, const Vec3& lo, const Vec3& hi, double r) {
   return (x.array() >= lo.array() - r).all() && (x.array() <= hi.array() + r).all();
 }
 
-}  // namespace
+/// Axis along which the box is longest: the sweep axis that separates the most.
+int longestAxis(const Vec3& lo, const Vec3& hi) {
+  Eigen::Index axis = 0;
+  (hi - lo).maxCoeff(&axis);
+  return static_cast<int>(axis);
+}
 
-namespace {
-
-// The refit is the one pass that reads every vertex each step: read the view's raw scalars
-// directly instead of going through PositionView::operator[]'s per-call type switch.
 template <typename T>
-MotionBox chunkBox(const char* base, std::size_t stride, const char* prev, std::size_t prev_stride,
-                   IndexRange box_vertices, IndexRange own_vertices, double& sum) {
-  MotionBox box;
-  double lo[3] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
-                  std::numeric_limits<double>::infinity()};
-  double hi[3] = {-lo[0], -lo[1], -lo[2]};
-  for (Index v : box_vertices) {
+Vec3 load(const char* base, std::size_t stride, Index v) {
+  const T* p = reinterpret_cast<const T*>(base + static_cast<std::size_t>(v) * stride);
+  return {static_cast<double>(p[0]), static_cast<double>(p[1]), static_cast<double>(p[2])};
+}
+
+// The refit is the one pass that reads every vertex each step. It streams through the vertices in
+// index order, i.e. through the positions' memory in order, reading the view's raw scalars (no
+// per-call type switch), and grows the box of the vertex's own chunk and of each chunk whose
+// triangles it is in. `sum` keeps a NaN that min/max would drop silently.
+template <typename T>
+void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev, std::size_t prev_stride,
+                 std::vector<MotionBox>& boxes, double& sum) {
+  const std::size_t n = ch.chunk_of.size();
+  for (std::size_t v = 0; v < n; ++v) {
+    // Positions usually live inside larger records (Bullet's nodes are 256 bytes): fetch ahead.
+    __builtin_prefetch(base + (v + 8) * stride);
+    if (prev != nullptr) __builtin_prefetch(prev + (v + 8) * prev_stride);
+    const Index c = ch.chunk_of[v];
+    if (c == kInvalidIndex) continue;
     const T* p = reinterpret_cast<const T*>(base + v * stride);
-    for (int a = 0; a < 3; ++a) {
-      const double x = static_cast<double>(p[a]);
-      sum += x;
-      lo[a] = x < lo[a] ? x : lo[a];
-      hi[a] = x > hi[a] ? x : hi[a];
-    }
-  }
-  if (prev != nullptr)
-    for (Index v : own_vertices) {
-      const T* p = reinterpret_cast<const T*>(base + v * stride);
+    const double x = static_cast<double>(p[0]), y = static_cast<double>(p[1]), z = static_cast<double>(p[2]);
+    sum += x + y + z;
+    MotionBox& box = boxes[c];
+    box.lo = box.lo.cwiseMin(Vec3(x, y, z));
+    box.hi = box.hi.cwiseMax(Vec3(x, y, z));
+    if (prev != nullptr) {
       const T* q = reinterpret_cast<const T*>(prev + v * prev_stride);
-      const double dx = double(p[0]) - double(q[0]), dy = double(p[1]) - double(q[1]), dz = double(p[2]) - double(q[2]);
+      const double dx = x - double(q[0]), dy = y - double(q[1]), dz = z - double(q[2]);
       const double m2 = dx * dx + dy * dy + dz * dz;
       sum += m2;
-      box.motion = m2 > box.motion ? m2 : box.motion;
+      box.motion = m2 > box.motion ? m2 : box.motion;  // squared until the end of the pass
     }
-  box.motion = std::sqrt(box.motion);
-  box.lo = Vec3(lo[0], lo[1], lo[2]);
-  box.hi = Vec3(hi[0], hi[1], hi[2]);
-  return box;
+    for (Index f : ch.foreign_of.row(static_cast<Index>(v))) {
+      MotionBox& fb = boxes[f];
+      fb.lo = fb.lo.cwiseMin(Vec3(x, y, z));
+      fb.hi = fb.hi.cwiseMax(Vec3(x, y, z));
+    }
+  }
+}
+
+// Area and longest edge of the triangles a chunk owns; their vertices were just read by the refit.
+template <typename T>
+void measureChunk(const MeshTopology& topo, const char* base, std::size_t stride, IndexRange triangles, double& area,
+                  double& max_edge2) {
+  for (Index t : triangles) {
+    const Triangle& tri = topo.triangle(t);
+    const Vec3 a = load<T>(base, stride, tri[0]), b = load<T>(base, stride, tri[1]), c = load<T>(base, stride, tri[2]);
+    const Vec3 ab = b - a, ac = c - a, bc = c - b;
+    area += 0.5 * ab.cross(ac).norm();
+    max_edge2 = std::max({max_edge2, ab.squaredNorm(), ac.squaredNorm(), bc.squaredNorm()});
+  }
 }
 
 }  // namespace
 
-void refitBounds(Body& b) {
+void refitBounds(Body& b, bool measure) {
   const ChunkLists& ch = b.chunks;
-  b.chunk_box.resize(ch.count());
+  b.chunk_box.assign(ch.count(), emptyBox());
   b.region_box.assign(b.regionCount(), emptyBox());
   b.body_box = emptyBox();
-  bool finite = true;
+  if (measure) {
+    b.shape.region_area.assign(b.regionCount(), 0.0);
+    b.shape.max_edge = 0.0;
+  }
   const char* base = static_cast<const char*>(b.positions.data());
   const std::size_t stride = b.positions.strideBytes();
   // The previous view is read with the current one's scalar type; mixed types take the slow path.
@@ -84,22 +124,35 @@ void refitBounds(Body& b) {
   const char* prev = b.previous.empty() || !same_type ? nullptr : static_cast<const char*>(b.previous.data());
   const std::size_t prev_stride = b.previous.strideBytes();
   const bool is_float = b.positions.scalar() == PositionView::Scalar::Float32;
-  for (std::size_t c = 0; c < ch.count(); ++c) {
-    double sum = 0.0;  // min/max may drop a NaN silently; a plain sum keeps it
-    MotionBox box = is_float ? chunkBox<float>(base, stride, prev, prev_stride, ch.box_vertices.row(c),
-                                               ch.vertices.row(c), sum)
-                             : chunkBox<double>(base, stride, prev, prev_stride, ch.box_vertices.row(c),
-                                                ch.vertices.row(c), sum);
-    if (!same_type)
-      for (Index v : ch.vertices.row(c)) box.motion = std::max(box.motion, b.vertexMotion(v));
+  double sum = 0.0;
+  if (is_float)
+    streamBoxes<float>(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
+  else
+    streamBoxes<double>(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
+  bool finite = std::isfinite(sum);
+  for (MotionBox& box : b.chunk_box) {
+    box.motion = std::sqrt(box.motion);
     // Finite but beyond kMaxCoordinate (a blown-up simulation) is rejected like NaN.
-    finite = finite && std::isfinite(sum) && box.lo.cwiseAbs().maxCoeff() <= kMaxCoordinate &&
-             box.hi.cwiseAbs().maxCoeff() <= kMaxCoordinate;
-    b.chunk_box[c] = box;
+    finite = finite && box.lo.cwiseAbs().maxCoeff() <= kMaxCoordinate && box.hi.cwiseAbs().maxCoeff() <= kMaxCoordinate;
   }
+  if (!same_type)
+    for (std::size_t c = 0; c < ch.count(); ++c)
+      for (Index v : ch.vertices.row(static_cast<Index>(c)))
+        b.chunk_box[c].motion = std::max(b.chunk_box[c].motion, b.vertexMotion(v));
   if (!finite) {
     checkFinite(b.positions, b.label());
     if (!b.previous.empty()) checkFinite(b.previous, b.label() + " (previous positions)");
+  }
+  if (measure) {
+    double max_edge2 = 0.0;
+    for (std::size_t c = 0; c < ch.count(); ++c) {
+      double& area = b.shape.region_area[ch.region_of[c]];
+      if (is_float)
+        measureChunk<float>(*b.topology, base, stride, ch.triangles.row(static_cast<Index>(c)), area, max_edge2);
+      else
+        measureChunk<double>(*b.topology, base, stride, ch.triangles.row(static_cast<Index>(c)), area, max_edge2);
+    }
+    b.shape.max_edge = std::sqrt(max_edge2);
   }
   for (Index r = 0; r < b.regionCount(); ++r) {
     for (Index c = ch.region_begin[r]; c < ch.region_begin[r + 1]; ++c) grow(b.region_box[r], b.chunk_box[c]);
@@ -109,114 +162,343 @@ void refitBounds(Body& b) {
 
 namespace {
 
+/// An interval along a sweep axis and what it belongs to.
+struct SweepItem {
+  double lo, hi;
+  Index id;
+};
+
+void sortItems(std::vector<SweepItem>& items) {
+  std::sort(items.begin(), items.end(),
+            [](const SweepItem& x, const SweepItem& y) { return x.lo != y.lo ? x.lo < y.lo : x.id < y.id; });
+}
+
+/// Sort and sweep between two sets: f(a, b) once for every pair whose intervals overlap.
+/// O((|A| + |B|) log + pairs overlapping along the axis); deterministic (ties broken by id).
+template <class F>
+void sweepBetween(std::vector<SweepItem>& a, std::vector<SweepItem>& b, F&& f) {
+  sortItems(a);
+  sortItems(b);
+  std::size_t i = 0, j = 0;
+  while (i < a.size() && j < b.size()) {
+    if (a[i].lo <= b[j].lo) {
+      for (std::size_t k = j; k < b.size() && b[k].lo <= a[i].hi; ++k) f(a[i].id, b[k].id);
+      ++i;
+    } else {
+      for (std::size_t k = i; k < a.size() && a[k].lo <= b[j].hi; ++k) f(a[k].id, b[j].id);
+      ++j;
+    }
+  }
+}
+
+/// The sensor axis of one region pair: n from A's particle to B's, and each chunk's extent along
+/// n (its box's support, grown by its reach).
+struct Axis {
+  bool valid = false;
+  Vec3 n = Vec3::Zero();
+  Vec3 abs_n = Vec3::Zero();
+  double project(const Vec3& x) const { return n.dot(x); }
+  // Extent of a box along n, without growth.
+  void extent(const MotionBox& b, double& lo, double& hi) const {
+    const Vec3 c = 0.5 * (b.lo + b.hi), h = 0.5 * (b.hi - b.lo);
+    const double m = n.dot(c), r = abs_n.dot(h);
+    lo = m - r;
+    hi = m + r;
+  }
+};
+
+struct ChunkRef {
+  Index chunk;
+  double lo_n, hi_n;  ///< extent along the sensor axis, without growth
+  Grown box;
+  // What the chunk pairs of one region pair read, gathered once per region pair on first use:
+  int vertices_at = -1;   ///< offset of this chunk's vertex records in Scratch::verts
+  int triangles_at = -1;  ///< offset of its triangle records in Scratch::tris
+};
+
+struct VertexRec {
+  Vec3 x;
+  double r;   ///< contact radius of the vertex: margin sum + motion term
+  double xn;  ///< projection on the sensor axis
+  Index v;
+};
+
+struct TriangleRec {
+  Vec3 lo, hi;
+  double nlo, nhi;  ///< extent along the sensor axis
+  Index t;
+};
+
+struct Scratch {
+  std::vector<SweepItem> items_a, items_b;
+  std::vector<ChunkRef> near_a, near_b;
+  std::vector<VertexRec> verts;
+  std::vector<TriangleRec> tris;
+  std::vector<Index> tri_keep;
+};
+
 struct PairContext {
   const Body& vb;
   const Body& tb;
   double margin_sum;
   double motion_factor;
+  const Axis& axis;
   std::vector<std::uint64_t>& out;
-  BoundsCounters& counters;
+  StepStats& counters;
+  Scratch& s;
 };
 
-// Vertices of chunk cv (of ctx.vb) against triangles of chunk ct (of ctx.tb).
-void chunkCandidates(const PairContext& ctx, Index cv, Index ct, std::vector<Vec3>& tri_lo, std::vector<Vec3>& tri_hi) {
-  const MotionBox& tbox = ctx.tb.chunk_box[ct];
-  const IndexRange tris = ctx.tb.chunks.triangles.row(ct);
-  bool boxes_ready = false;
-  for (Index v : ctx.vb.chunks.vertices.row(cv)) {
+void gatherVertices(const PairContext& ctx, ChunkRef& c) {
+  if (c.vertices_at >= 0) return;
+  c.vertices_at = static_cast<int>(ctx.s.verts.size());
+  for (Index v : ctx.vb.chunks.vertices.row(c.chunk)) {
     const Vec3 x = ctx.vb.positions[v];
-    const double r = ctx.margin_sum + ctx.motion_factor * ctx.vb.vertexMotion(v);
-    ++ctx.counters.vertices;
-    if (!inside(x, tbox.lo, tbox.hi, r)) continue;
-    if (!boxes_ready) {
-      tri_lo.resize(tris.size());
-      tri_hi.resize(tris.size());
-      const MeshTopology& topo = *ctx.tb.topology;
-      for (std::size_t k = 0; k < tris.size(); ++k) {
-        const Triangle& tri = topo.triangle(tris[k]);
-        const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], c = ctx.tb.positions[tri[2]];
-        tri_lo[k] = a.cwiseMin(b).cwiseMin(c);
-        tri_hi[k] = a.cwiseMax(b).cwiseMax(c);
-      }
-      ctx.counters.triangles += tris.size();
-      boxes_ready = true;
+    ctx.s.verts.push_back(
+        {x, ctx.margin_sum + ctx.motion_factor * ctx.vb.vertexMotion(v), ctx.axis.valid ? ctx.axis.project(x) : 0.0, v});
+  }
+  ctx.counters.candidate_vertices += ctx.vb.chunks.vertices.row(c.chunk).size();
+}
+
+void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
+  if (c.triangles_at >= 0) return;
+  c.triangles_at = static_cast<int>(ctx.s.tris.size());
+  const MeshTopology& topo = *ctx.tb.topology;
+  for (Index t : ctx.tb.chunks.triangles.row(c.chunk)) {
+    const Triangle& tri = topo.triangle(t);
+    const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], cc = ctx.tb.positions[tri[2]];
+    TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0, t};
+    if (ctx.axis.valid) {
+      const double pa = ctx.axis.project(a), pb = ctx.axis.project(b), pc = ctx.axis.project(cc);
+      rec.nlo = std::min({pa, pb, pc});
+      rec.nhi = std::max({pa, pb, pc});
     }
-    for (std::size_t k = 0; k < tris.size(); ++k) {
-      ++ctx.counters.probes;
-      if (inside(x, tri_lo[k], tri_hi[k], r)) ctx.out.push_back((std::uint64_t{v} << 32) | tris[k]);
+    ctx.s.tris.push_back(rec);
+  }
+  ctx.counters.candidate_triangles += ctx.tb.chunks.triangles.row(c.chunk).size();
+}
+
+// Vertices of chunk cv (of ctx.vb) against the triangles owned by chunk ct (of ctx.tb).
+void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
+  const std::size_t nt = ctx.tb.chunks.triangles.row(ct.chunk).size();
+  if (nt == 0) return;
+  const bool sensors = ctx.axis.valid;
+  const MotionBox& tbox = ctx.tb.chunk_box[ct.chunk];
+  gatherVertices(ctx, cv);
+  const std::size_t nv = ctx.vb.chunks.vertices.row(cv.chunk).size();
+  bool ready = false;
+  Scratch& s = ctx.s;
+  for (std::size_t i = 0; i < nv; ++i) {
+    const VertexRec& vr = s.verts[static_cast<std::size_t>(cv.vertices_at) + i];
+    // The slab: a vertex farther than r from the triangle chunk's extent along n is farther
+    // than r from each of its triangles.
+    if (sensors && (vr.xn + vr.r < ct.lo_n || vr.xn - vr.r > ct.hi_n)) {
+      ++ctx.counters.vertices_dropped;
+      continue;
+    }
+    if (!inside(vr.x, tbox.lo, tbox.hi, vr.r)) continue;
+    if (!ready) {
+      // Only the triangles that reach the vertex chunk's grown box can meet any of its vertices.
+      gatherTriangles(ctx, ct);
+      s.tri_keep.clear();
+      const Grown& vbox = cv.box;
+      const double g = ctx.margin_sum - ctx.vb.margin;  // the triangle side's share of the radius
+      for (std::size_t k = 0; k < nt; ++k) {
+        const TriangleRec& tr = s.tris[static_cast<std::size_t>(ct.triangles_at) + k];
+        if ((tr.lo.array() - g <= vbox.hi.array()).all() && (vbox.lo.array() <= tr.hi.array() + g).all() &&
+            (!sensors || (tr.nhi + g >= cv.lo_n - vbox.g && tr.nlo - g <= cv.hi_n + vbox.g)))
+          s.tri_keep.push_back(static_cast<Index>(static_cast<std::size_t>(ct.triangles_at) + k));
+      }
+      ready = true;
+    }
+    for (Index k : s.tri_keep) {
+      const TriangleRec& tr = s.tris[k];
+      ++ctx.counters.candidate_probes;
+      if (sensors && (vr.xn + vr.r < tr.nlo || vr.xn - vr.r > tr.nhi)) continue;
+      if (inside(vr.x, tr.lo, tr.hi, vr.r)) ctx.out.push_back((std::uint64_t{vr.v} << 32) | tr.t);
     }
   }
 }
 
+struct Group {
+  BodyId vb, tb;
+  std::vector<std::uint64_t> keys;
+};
+
+class Collector {
+ public:
+  Collector(const CullParams& p, std::vector<FlaggedPair>& flagged, StepStats& c)
+      : params_(p), flagged_(flagged), counters_(c) {}
+
+  void bodyPair(const Body& A, const Body& B) {
+    ++counters_.body_pairs;
+    const Grown boxA = grown(A.body_box, A.margin, params_.motion_factor);
+    const Grown boxB = grown(B.body_box, B.margin, params_.motion_factor);
+    // Sweep along the longest axis of the two bodies' common box.
+    const int ax = longestAxis(boxA.lo.cwiseMax(boxB.lo), boxA.hi.cwiseMin(boxB.hi));
+    const auto regionItems = [&](const Body& X, const Grown& other, std::vector<SweepItem>& items) {
+      items.clear();
+      for (Index r = 0; r < X.regionCount(); ++r) {
+        const Grown g = grown(X.region_box[r], X.margin, params_.motion_factor);
+        if (overlap(g, other)) items.push_back({g.lo[ax], g.hi[ax], r});
+      }
+    };
+    regionItems(A, boxB, s_.items_a);
+    if (s_.items_a.empty()) return;
+    regionItems(B, boxA, s_.items_b);
+    Group ab{A.id, B.id, {}}, ba{B.id, A.id, {}};
+    region_pairs_.clear();
+    sweepBetween(s_.items_a, s_.items_b, [&](Index ri, Index rj) { region_pairs_.emplace_back(ri, rj); });
+    // Bullet's contact solver is Gauss-Seidel: contacts in mesh order (not in sweep order) keep
+    // its result independent of the sweep axis and measured better on resting stacks.
+    std::sort(region_pairs_.begin(), region_pairs_.end());
+    for (const auto& [ri, rj] : region_pairs_) regionPair(A, ri, B, rj, ab.keys, ba.keys);
+    if (!ab.keys.empty()) groups.push_back(std::move(ab));
+    if (!ba.keys.empty()) groups.push_back(std::move(ba));
+  }
+
+  std::vector<Group> groups;
+
+ private:
+  void regionPair(const Body& A, Index ri, const Body& B, Index rj, std::vector<std::uint64_t>& ab_keys,
+                  std::vector<std::uint64_t>& ba_keys) {
+    const double mf = params_.motion_factor;
+    const Grown boxI = grown(A.region_box[ri], A.margin, mf);
+    const Grown boxJ = grown(B.region_box[rj], B.margin, mf);
+    if (!overlap(boxI, boxJ)) return;
+    ++counters_.region_pairs;
+    Axis axis;
+    if (params_.use_sensors) {
+      // The sensors' axis: from the particle of region I to the particle of region J.
+      const Vec3 d = B.positions[B.particle_vertex[rj]] - A.positions[A.particle_vertex[ri]];
+      const double len = d.norm();
+      const double scale = (boxI.hi - boxI.lo).norm() + (boxJ.hi - boxJ.lo).norm();
+      if (len > 1e-9 * scale && std::isfinite(len)) {
+        axis.valid = true;
+        axis.n = d / len;
+        axis.abs_n = axis.n.cwiseAbs();
+      }
+    }
+    // Only the chunks of I that reach J's box and of J that reach I's box can pair up.
+    const auto nearChunks = [&](const Body& X, Index r, const Grown& other, std::vector<ChunkRef>& out) {
+      out.clear();
+      for (Index c = X.chunks.region_begin[r]; c < X.chunks.region_begin[r + 1]; ++c) {
+        const Grown g = grown(X.chunk_box[c], X.margin, mf);
+        if (!overlap(g, other)) continue;
+        ChunkRef ref{c, 0.0, 0.0, g};
+        if (axis.valid) axis.extent(X.chunk_box[c], ref.lo_n, ref.hi_n);
+        out.push_back(ref);
+      }
+      counters_.chunks_in += out.size();
+    };
+    nearChunks(A, ri, boxJ, s_.near_a);
+    if (s_.near_a.empty()) return;
+    nearChunks(B, rj, boxI, s_.near_b);
+    if (s_.near_b.empty()) return;
+    if (axis.valid && !sensorSlab()) {
+      ++counters_.region_pairs_separated;
+      return;
+    }
+    FlaggedPair f;
+    f.body_a = A.id;  // bodies come ordered by id
+    f.region_a = ri;
+    f.body_b = B.id;
+    f.region_b = rj;
+    f.by_bounds = true;
+    flagged_.push_back(f);
+
+    const auto t0 = std::chrono::steady_clock::now();
+    const PairContext to_b{A, B, A.margin + B.margin, mf, axis, ab_keys, counters_, s_};
+    const PairContext to_a{B, A, A.margin + B.margin, mf, axis, ba_keys, counters_, s_};
+    const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
+    s_.items_a.clear();
+    s_.items_b.clear();
+    for (std::size_t k = 0; k < s_.near_a.size(); ++k)
+      s_.items_a.push_back({s_.near_a[k].box.lo[ax], s_.near_a[k].box.hi[ax], static_cast<Index>(k)});
+    for (std::size_t k = 0; k < s_.near_b.size(); ++k)
+      s_.items_b.push_back({s_.near_b[k].box.lo[ax], s_.near_b[k].box.hi[ax], static_cast<Index>(k)});
+    chunk_pairs_.clear();
+    sweepBetween(s_.items_a, s_.items_b, [&](Index ka, Index kb) {
+      const ChunkRef& ca = s_.near_a[ka];
+      const ChunkRef& cb = s_.near_b[kb];
+      if (!overlap(ca.box, cb.box)) return;
+      if (axis.valid && (ca.hi_n + ca.box.g + cb.box.g < cb.lo_n || cb.hi_n + ca.box.g + cb.box.g < ca.lo_n)) return;
+      chunk_pairs_.emplace_back(ka, kb);
+    });
+    std::sort(chunk_pairs_.begin(), chunk_pairs_.end());  // mesh order, as for region pairs
+    counters_.chunk_pairs += chunk_pairs_.size();
+    s_.verts.clear();
+    s_.tris.clear();
+    // Each chunk is gathered once as a vertex side for one direction and as a triangle side for
+    // the other: two passes keep the two directions' records apart.
+    for (const auto& [ka, kb] : chunk_pairs_) chunkCandidates(to_b, s_.near_a[ka], s_.near_b[kb]);
+    for (ChunkRef& c : s_.near_a) c.vertices_at = c.triangles_at = -1;
+    for (ChunkRef& c : s_.near_b) c.vertices_at = c.triangles_at = -1;
+    s_.verts.clear();
+    s_.tris.clear();
+    for (const auto& [ka, kb] : chunk_pairs_) chunkCandidates(to_a, s_.near_b[kb], s_.near_a[ka]);
+    counters_.ms_candidates += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  }
+
+  /// The sensor decision along the axis n (from I's particle towards J's): the highest reach of
+  /// I's chunks and the lowest of J's. When I's highest stays below J's lowest the pair is apart
+  /// (false); otherwise the chunks that cannot reach across are dropped and the pair goes on.
+  bool sensorSlab() {
+    std::vector<ChunkRef>& a = s_.near_a;
+    std::vector<ChunkRef>& b = s_.near_b;
+    for (int pass = 0; pass < 2; ++pass) {
+      double hi_a = -std::numeric_limits<double>::infinity(), lo_b = std::numeric_limits<double>::infinity();
+      for (const ChunkRef& c : a) hi_a = std::max(hi_a, c.hi_n + c.box.g);
+      for (const ChunkRef& c : b) lo_b = std::min(lo_b, c.lo_n - c.box.g);
+      if (hi_a < lo_b) return false;
+      // A chunk of I can only meet J if its grown top reaches J's lowest grown point; likewise
+      // a chunk of J must reach down to I's highest.
+      const std::size_t na = a.size(), nb = b.size();
+      a.erase(std::remove_if(a.begin(), a.end(), [&](const ChunkRef& c) { return c.hi_n + c.box.g < lo_b; }), a.end());
+      b.erase(std::remove_if(b.begin(), b.end(), [&](const ChunkRef& c) { return c.lo_n - c.box.g > hi_a; }), b.end());
+      counters_.chunks_dropped += (na - a.size()) + (nb - b.size());
+      if (a.empty() || b.empty()) return false;
+      if (a.size() == na && b.size() == nb) break;
+    }
+    return true;
+  }
+
+  const CullParams& params_;
+  std::vector<FlaggedPair>& flagged_;
+  StepStats& counters_;
+  Scratch s_;
+  std::vector<std::pair<Index, Index>> region_pairs_, chunk_pairs_;
+};
+
 }  // namespace
 
-void collectByBounds(const std::vector<Body*>& bodies, double motion_factor, double flag_pad,
-                     std::vector<FlaggedPair>& flagged, std::vector<CandidatePair>& candidates,
-                     BoundsCounters& counters) {
-  struct Group {
-    BodyId vb, tb;
-    std::vector<std::uint64_t> keys;
-  };
-  std::vector<Group> groups;
-  std::vector<Vec3> tri_lo, tri_hi;
-  std::vector<Index> near_a, near_b, near_rb;
-  for (std::size_t i = 0; i < bodies.size(); ++i) {
-    const Body& A = *bodies[i];
-    const double ga = A.margin + motion_factor * A.body_box.motion + flag_pad;
-    for (std::size_t j = i + 1; j < bodies.size(); ++j) {
-      const Body& B = *bodies[j];
-      const double gb = B.margin + motion_factor * B.body_box.motion + flag_pad;
-      if (!overlap(A.body_box, ga, B.body_box, gb)) continue;
-      Group ab{A.id, B.id, {}}, ba{B.id, A.id, {}};
-      const PairContext to_b{A, B, A.margin + B.margin, motion_factor, ab.keys, counters};
-      const PairContext to_a{B, A, A.margin + B.margin, motion_factor, ba.keys, counters};
-      // Only regions that reach the other body's box can pair up: filter both sides first.
-      near_rb.clear();
-      for (Index rj = 0; rj < B.regionCount(); ++rj)
-        if (overlap(B.region_box[rj], B.margin + motion_factor * B.region_box[rj].motion + flag_pad, A.body_box, ga))
-          near_rb.push_back(rj);
-      if (near_rb.empty()) continue;
-      for (Index ri = 0; ri < A.regionCount(); ++ri) {
-        const MotionBox& boxI = A.region_box[ri];
-        const double gI = A.margin + motion_factor * boxI.motion;
-        if (!overlap(boxI, gI + flag_pad, B.body_box, gb)) continue;
-        for (Index rj : near_rb) {
-          const MotionBox& boxJ = B.region_box[rj];
-          const double gJ = B.margin + motion_factor * boxJ.motion;
-          if (!overlap(boxI, gI + flag_pad, boxJ, gJ + flag_pad)) continue;
-          FlaggedPair f;
-          f.body_a = A.id;  // bodies are ordered by id
-          f.region_a = ri;
-          f.body_b = B.id;
-          f.region_b = rj;
-          f.by_bounds = true;
-          flagged.push_back(f);
-          if (!overlap(boxI, gI, boxJ, gJ)) continue;  // flagged at μ, but no contact radius reach
-          // Only the chunks of I that reach J's box and of J that reach I's box can pair up.
-          near_a.clear();
-          near_b.clear();
-          for (Index c = A.chunks.region_begin[ri]; c < A.chunks.region_begin[ri + 1]; ++c)
-            if (overlap(A.chunk_box[c], A.margin + motion_factor * A.chunk_box[c].motion, boxJ, gJ)) near_a.push_back(c);
-          if (near_a.empty()) continue;
-          for (Index c = B.chunks.region_begin[rj]; c < B.chunks.region_begin[rj + 1]; ++c)
-            if (overlap(B.chunk_box[c], B.margin + motion_factor * B.chunk_box[c].motion, boxI, gI)) near_b.push_back(c);
-          for (Index ca : near_a) {
-            const MotionBox& bxa = A.chunk_box[ca];
-            const double gca = A.margin + motion_factor * bxa.motion;
-            for (Index cb : near_b) {
-              const MotionBox& bxb = B.chunk_box[cb];
-              if (!overlap(bxa, gca, bxb, B.margin + motion_factor * bxb.motion)) continue;
-              ++counters.chunk_pairs;
-              chunkCandidates(to_b, ca, cb, tri_lo, tri_hi);
-              chunkCandidates(to_a, cb, ca, tri_lo, tri_hi);
-            }
-          }
-        }
-      }
-      if (!ab.keys.empty()) groups.push_back(std::move(ab));
-      if (!ba.keys.empty()) groups.push_back(std::move(ba));
-    }
+void cullAndCollect(const std::vector<Body*>& bodies, const CullParams& params, std::vector<FlaggedPair>& flagged,
+                    std::vector<CandidatePair>& candidates, StepStats& counters) {
+  // Body pairs by sort and sweep along the axis where the bodies' centres spread most.
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const Body* b : bodies) {
+    const Vec3 c = 0.5 * (b->body_box.lo + b->body_box.hi);
+    lo = lo.cwiseMin(c);
+    hi = hi.cwiseMax(c);
   }
+  const int ax = bodies.empty() ? 0 : longestAxis(lo, hi);
+  std::vector<SweepItem> items;
+  std::vector<Grown> boxes(bodies.size());
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    boxes[i] = grown(bodies[i]->body_box, bodies[i]->margin, params.motion_factor);
+    items.push_back({boxes[i].lo[ax], boxes[i].hi[ax], static_cast<Index>(i)});
+  }
+  sortItems(items);
+  std::vector<std::pair<Index, Index>> pairs;
+  for (std::size_t i = 0; i < items.size(); ++i)
+    for (std::size_t k = i + 1; k < items.size() && items[k].lo <= items[i].hi; ++k) {
+      const Index x = items[i].id, y = items[k].id;
+      if (overlap(boxes[x], boxes[y])) pairs.emplace_back(std::min(x, y), std::max(x, y));
+    }
+  std::sort(pairs.begin(), pairs.end());  // the result does not depend on the sweep axis
+  Collector collect(params, flagged, counters);
+  for (const auto& [i, j] : pairs) collect.bodyPair(*bodies[i], *bodies[j]);
+
+  std::vector<Group>& groups = collect.groups;
   std::sort(groups.begin(), groups.end(),
             [](const Group& x, const Group& y) { return x.vb != y.vb ? x.vb < y.vb : x.tb < y.tb; });
   std::size_t total = candidates.size();

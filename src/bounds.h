@@ -1,6 +1,15 @@
-// Private: the [beyond] bounds layer of Flagging::SensorsAndBounds. Flat boxes per body, region
-// and chunk, refit from the positions every step (O(M), no tree), tested top-down only where the
-// level above overlaps. Conservative: every (vertex, triangle) pair of two bodies closer than
+// Private: the default midphase (Flagging::SensorsAndBounds) and its boxes-only ablation
+// (Flagging::Bounds). See docs/METHOD.md, "Coarse cull and sensor decision".
+//
+// 1. Refit: flat boxes per chunk (≤ chunk_vertices vertices and the triangles they own), region
+//    and body, from the positions, every step: O(M), no tree.
+// 2. Coarse cull: body pairs and region pairs whose grown boxes overlap, found by sort-and-sweep.
+// 3. Sensor decision (SensorsAndBounds only): the segment between the particles of the two
+//    regions is a candidate separating axis n. The support extents of the two regions' chunks
+//    along n prove the pair apart, drop chunks outside the slab, and drop vertices and triangles
+//    that cannot reach the other side's extent along n.
+// 4. Chunk pairs by sort-and-sweep; candidate (vertex, triangle) pairs inside each chunk pair.
+// Every step is conservative: each (vertex, triangle) pair of two bodies closer than
 // margin_A + margin_B + motion_factor·|x_v − x_v,prev| comes out as a candidate, exactly once.
 #pragma once
 
@@ -12,22 +21,19 @@
 namespace psc::detail {
 
 /// Refits b's chunk, region and body boxes; throws psc::Error naming the first non-finite vertex.
-void refitBounds(Body& b);
+/// With `measure`, also fills b.shape (region areas and the longest edge) in the same pass.
+void refitBounds(Body& b, bool measure);
 
-struct BoundsCounters {
-  std::size_t chunk_pairs = 0;
-  std::size_t vertices = 0;
-  std::size_t triangles = 0;
-  std::size_t probes = 0;
+struct CullParams {
+  double motion_factor = 2.0;
+  bool use_sensors = true;  ///< false: Flagging::Bounds (the ablation)
 };
 
-/// Flags the region pairs of different bodies whose grown boxes overlap and appends the candidate
-/// pairs of their overlapping chunks, grouped and sorted by (vertex_body, triangle_body).
-/// Region (and body) boxes are grown by `flag_pad` more on each side, so that region pairs are
-/// flagged out to the collision distance μ (two pads = μ's geometric term) while chunk pairs and
-/// candidates stay at the contact radius.
-void collectByBounds(const std::vector<Body*>& bodies, double motion_factor, double flag_pad,
-                     std::vector<FlaggedPair>& flagged, std::vector<CandidatePair>& candidates,
-                     BoundsCounters& counters);
+/// Flags the region pairs of different bodies that reach the candidate stage and appends the
+/// candidate pairs, grouped and sorted by (vertex_body, triangle_body). `bodies` ascending by id.
+/// Adds to the cull's counters in `stats` (body_pairs … candidate_probes) and to ms_candidates
+/// (the time inside chunk pairs).
+void cullAndCollect(const std::vector<Body*>& bodies, const CullParams& params, std::vector<FlaggedPair>& flagged,
+                    std::vector<CandidatePair>& candidates, StepStats& stats);
 
 }  // namespace psc::detail

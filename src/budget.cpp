@@ -130,16 +130,21 @@ Proxy decimate(const MeshTopology& topology, const PositionView& positions, std:
 
 // Runs HACD on the proxy and labels each proxy vertex with the cluster most of its triangles
 // belong to (ties: the lower cluster). Proxy vertices in no proxy triangle get kInvalidIndex.
-// HACD's hull code (ICHull) double-frees on degenerate input; the fuzzer found two such inputs.
-// It is only given consistently wound surfaces (no directed edge twice) that enclose a clear volume;
-// anything else is labelled one part per connected piece, without HACD. Cost: shapes whose
-// coincident vertices merge into a non-manifold proxy (makeFork's crotch) get one part.
+// HACD's hull code (ICHull) double-frees on degenerate input; the fuzzer found three such inputs
+// (fuzz/crashers/world/hacd_double_free*). It is only given closed, consistently wound surfaces (every
+// directed edge once, and its reverse once) that enclose a clear volume; anything else, open
+// sheets included, is labelled one part per connected piece, without HACD. Closedness also makes
+// the signed volume below independent of the origin (the third crasher was a nearly flat open
+// sheet whose "volume" came from its distance to the origin). Cost: shapes whose coincident
+// vertices merge into a non-manifold proxy (makeFork's crotch) get one part, as do open meshes.
 bool safeForHacd(const Proxy& proxy) {
   if (proxy.triangles.size() < 4) return false;
   std::map<std::pair<Index, Index>, int> directed;
   for (const Triangle& t : proxy.triangles)
     for (std::size_t k = 0; k < 3; ++k)
       if (++directed[{t[k], t[(k + 1) % 3]}] > 1) return false;  // a directed edge twice: bad winding
+  for (const auto& edge : directed)
+    if (directed.count({edge.first.second, edge.first.first}) == 0) return false;  // a border: open
   Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
   double volume6 = 0.0;
   for (const Triangle& t : proxy.triangles) {
@@ -505,7 +510,7 @@ std::vector<std::size_t> particleBudget(const std::vector<BudgetBody>& bodies) {
       continue;
     }
     // Only parts of other bodies can touch one of this body's parts: same-body particles never
-    // pull (ALGORITHM.md §4), so a body's own parts do not count against the cap.
+    // pull (docs/METHOD.md §4), so a body's own parts do not count against the cap.
     const std::size_t others = total_parts - body.parts.parts.size();
     std::size_t sum = 0;
     for (const ConvexPart& p : body.parts.parts) {

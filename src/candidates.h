@@ -1,6 +1,6 @@
 // Private: the (vertex, triangle) candidate pairs of one flagged region pair in one direction,
 // found through a small dense grid over the triangle set so the cost is about
-// O(|V| + |T| + candidates), never |V|·|T| (ALGORITHM.md §5).
+// O(|V| + |T| + candidates), never |V|·|T| (docs/METHOD.md §6.1).
 #pragma once
 
 #include "body.h"

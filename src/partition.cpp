@@ -74,8 +74,8 @@ class Lbg {
     while (codes_.size() < count) {
       std::vector<std::array<std::size_t, 2>> pairs;
       if (s_.any_count) {
-        // One split at a time, on the cluster holding the most distortion (ALGORITHM.md §3,
-        // [beyond] the thesis's powers of two, §5.3).
+        // One split at a time, on the cluster holding the most distortion ([beyond] the thesis's
+        // powers of two; the thesis names any count as future work, thesis §5.3).
         const std::vector<double> total = clusterDistortion();
         const std::size_t worst =
             static_cast<std::size_t>(std::max_element(total.begin(), total.end()) - total.begin());
@@ -364,7 +364,7 @@ Index bestNeighbourRegion(const MeshTopology& topology, const std::vector<Index>
   return best;
 }
 
-// Connectivity repair (ALGORITHM.md §3 [beyond]). See partitionLBG's header comment for the
+// Connectivity repair ([beyond]: LBG ignores connectivity). See partitionLBG's header comment for the
 // contract; returns the number of islands moved.
 std::size_t connectRegions(const MeshTopology& topology, const std::vector<Index>& used, std::size_t count,
                            std::size_t pieces, std::vector<Index>& region_of) {

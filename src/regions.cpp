@@ -92,21 +92,23 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
       for (std::size_t k = range.first; k < range.second; ++k) {
         chunk_of[ids[k]] = chunk;
         vpairs.emplace_back(chunk, ids[k]);
-        bpairs.emplace_back(chunk, ids[k]);
       }
       ++chunk;
     }
     out.region_begin.push_back(chunk);
+    out.region_of.resize(chunk, static_cast<Index>(r));
   }
   for (Index t = 0; t < topology.triangleCount(); ++t) {
     const Triangle& tri = topology.triangle(t);
     const Index owner = chunk_of[*std::min_element(tri.begin(), tri.end())];
     tpairs.emplace_back(owner, t);
-    for (Index v : tri) bpairs.emplace_back(owner, v);
+    for (Index v : tri)
+      if (chunk_of[v] != owner) bpairs.emplace_back(v, owner);
   }
   out.vertices = IndexRows::fromPairs(chunk, vpairs);
   out.triangles = IndexRows::fromPairs(chunk, tpairs);
-  out.box_vertices = IndexRows::fromPairs(chunk, bpairs);
+  out.foreign_of = IndexRows::fromPairs(topology.vertexCount(), bpairs);
+  out.chunk_of = std::move(chunk_of);
   return out;
 }
 

@@ -3,6 +3,7 @@
 #include "body.h"
 #include "bounds.h"
 #include "candidates.h"
+#include "thesis_mode.h"
 #include "psc/error.h"
 #include "psc/hash_grid.h"
 #include "psc/repartition.h"
@@ -10,6 +11,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <numeric>
 #include <sstream>
 
@@ -24,20 +26,6 @@ double msSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
-bool flaggedLess(const FlaggedPair& a, const FlaggedPair& b) {
-  if (a.body_a != b.body_a) return a.body_a < b.body_a;
-  if (a.region_a != b.region_a) return a.region_a < b.region_a;
-  if (a.body_b != b.body_b) return a.body_b < b.body_b;
-  return a.region_b < b.region_b;
-}
-
-bool candidateLess(const CandidatePair& a, const CandidatePair& b) {
-  if (a.vertex_body != b.vertex_body) return a.vertex_body < b.vertex_body;
-  if (a.triangle_body != b.triangle_body) return a.triangle_body < b.triangle_body;
-  if (a.vertex != b.vertex) return a.vertex < b.vertex;
-  return a.triangle < b.triangle;
-}
-
 }  // namespace
 
 struct SensorWorld::Impl {
@@ -48,17 +36,12 @@ struct SensorWorld::Impl {
   StepResult result;
 
   // Particle arrays for one step, ordered by (body id, region).
-  std::vector<Body*> p_body;
-  std::vector<Index> p_region;
-  std::vector<Vec3> p_pos;
+  detail::Particles particles;
   std::vector<Index> p_dest;
   std::vector<Index> p_left;  // vertex each particle left last round (no_backtrack)
-  std::vector<double> p_motion;
   std::vector<Index> near;
   PointHashGrid grid;
-  detail::PairGridScratch pair_scratch;
-  std::vector<Index> vset, tset;
-  std::vector<std::uint64_t> keys;
+  detail::ThesisScratch thesis;
 
   Body& get(BodyId id) {
     auto it = bodies.find(id);
@@ -67,23 +50,19 @@ struct SensorWorld::Impl {
   }
   const Body& get(BodyId id) const { return const_cast<Impl*>(this)->get(id); }
 
+  /// R_eff for this step (after the refit). Auto: twice the largest region box diagonal. Two
+  /// regions that touch have their particles within the sum of their diameters, so touching
+  /// regions always feel each other, and each particle only feels its neighbourhood.
   double rEff() const {
     double r = settings.r_eff;
-    double d1 = 0.0, d2 = 0.0, max_edge = 0.0, max_margin = 0.0;  // two largest diameters
+    double max_region = 0.0, max_edge = 0.0, max_margin = 0.0;
     for (const auto& kv : bodies) {
-      const double d = kv.second->diameter;
-      if (d > d1) {
-        d2 = d1;
-        d1 = d;
-      } else {
-        d2 = std::max(d2, d);
-      }
+      for (const detail::MotionBox& box : kv.second->region_box)
+        if (box.hi.x() >= box.lo.x()) max_region = std::max(max_region, (box.hi - box.lo).norm());
       max_edge = std::max(max_edge, kv.second->mean_edge);
       max_margin = std::max(max_margin, kv.second->margin);
     }
-    // Any two surface points of two touching bodies are closer than the sum of their diameters,
-    // so with this R_eff the particles of touching bodies always feel each other.
-    if (r == 0.0) r = d1 + d2;
+    if (r == 0.0) r = 2.0 * max_region;
     // §5.1.3: a touching pair is only pulled together when R_eff exceeds μ.
     const double max_mu = settings.mu_edge_factor * max_edge + 2.0 * max_margin;
     return std::max(r, 1.01 * max_mu + 1e-12);
@@ -91,10 +70,8 @@ struct SensorWorld::Impl {
 
   void partitionBody(Body& b, std::size_t count);
   void preparePartitions(StepStats& stats);
-  void checkRepartition(Body& b, StepStats& stats);
+  void refitAndCheck(Body& b, StepStats& stats);
   void moveParticles(StepStats& stats, double r_eff);
-  void flagBySensors(double r_eff, StepStats& stats);
-  void buildCandidates(StepStats& stats);
 };
 
 void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
@@ -105,15 +82,17 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
                   ? detail::buildRegionLists(*b.topology, b.partition.region_of, b.partition.regionCount())
                   : detail::RegionLists{};
   b.particle_vertex = b.partition.seed_vertex;
-  const EdgeStats es = edgeStats(*b.topology, b.positions);
-  b.mean_edge = es.mean;
-  b.max_edge = es.max;
-  const std::vector<double> areas =
-      regionAreas(*b.topology, b.positions, b.partition, b.particle_vertex, settings.repartition.estimator);
-  b.area_star = areas.empty() ? 0.0 : *std::max_element(areas.begin(), areas.end());
-  b.diameter = 2.0 * bounds(b.positions).radius;
+  b.mean_edge = edgeStats(*b.topology, b.positions).mean;
   b.chunks = detail::buildChunks(*b.topology, b.positions, b.partition.region_of, b.partition.regionCount(),
                                  settings.chunk_vertices);
+  // The repartition check compares with what the same refit measures now (A* and the longest edge).
+  detail::refitBounds(b, true);
+  b.max_edge = b.shape.max_edge;
+  const std::vector<double> areas =
+      settings.repartition.estimator == AreaEstimator::TrueArea
+          ? b.shape.region_area
+          : regionAreas(*b.topology, b.positions, b.partition, b.particle_vertex, settings.repartition.estimator);
+  b.area_star = areas.empty() ? 0.0 : *std::max_element(areas.begin(), areas.end());
   b.budget = count;
   b.partitioned = true;
   // Bodies are checked on staggered steps so the O(M) checks do not all land on one step.
@@ -150,27 +129,33 @@ void SensorWorld::Impl::preparePartitions(StepStats& stats) {
   membership_changed = false;
 }
 
-void SensorWorld::Impl::checkRepartition(Body& b, StepStats& stats) {
+void SensorWorld::Impl::refitAndCheck(Body& b, StepStats& stats) {
   const RepartitionSettings& rs = settings.repartition;
-  if (!rs.enabled || !b.deformable || ++b.steps_since_check < rs.check_every) return;
+  const bool check = rs.enabled && b.deformable && ++b.steps_since_check >= rs.check_every;
+  // The check's area and edge figures come out of the refit's pass over the vertices.
+  auto t = Clock::now();
+  detail::refitBounds(b, check);
+  stats.ms_refit += msSince(t);
+  if (!check) return;
+  t = Clock::now();
   b.steps_since_check = 0;
-  bool trigger = false;
-  if (rs.edge_stretch_trigger > 0.0) {
-    const EdgeStats es = edgeStats(*b.topology, b.positions);
-    trigger = es.max > rs.edge_stretch_trigger * b.max_edge;
-  }
+  bool trigger = rs.edge_stretch_trigger > 0.0 && b.shape.max_edge > rs.edge_stretch_trigger * b.max_edge;
   if (!trigger) {
-    const std::vector<double> areas = regionAreas(*b.topology, b.positions, b.partition, b.particle_vertex, rs.estimator);
+    const std::vector<double> areas =
+        rs.estimator == AreaEstimator::TrueArea
+            ? b.shape.region_area
+            : regionAreas(*b.topology, b.positions, b.partition, b.particle_vertex, rs.estimator);
     trigger = !areas.empty() && *std::max_element(areas.begin(), areas.end()) > rs.area_trigger * b.area_star;
   }
   if (trigger) {
     partitionBody(b, b.budget);
     ++stats.repartitions;
   }
+  stats.ms_repartition += msSince(t);
 }
 
 void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
-  const std::size_t n = p_pos.size();
+  const std::size_t n = particles.pos.size();
   double slack = 0.0;  // a candidate vertex lies up to one (stretched) edge from its particle
   for (const auto& kv : bodies) slack = std::max(slack, kv.second->max_edge);
   slack *= std::max(1.0, settings.repartition.edge_stretch_trigger);
@@ -182,27 +167,27 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
   p_dest.resize(n);
   p_left.assign(n, kInvalidIndex);
   for (int round = 0; round < settings.max_rounds; ++round) {
-    grid.build(p_pos, reach);
+    grid.build(particles.pos, reach);
     std::size_t moved = 0;
     for (std::size_t i = 0; i < n; ++i) {
-      Body& b = *p_body[i];
-      const Index region = p_region[i];
+      Body& b = *particles.body[i];
+      const Index region = particles.region[i];
       const Index cur = b.particle_vertex[region];
       p_dest[i] = cur;
       near.clear();
-      grid.forEachCandidate(p_pos[i], [&](Index j) {
-        if (p_body[j] != &b && (p_pos[j] - p_pos[i]).squaredNorm() < reach2) near.push_back(j);
+      grid.forEachCandidate(particles.pos[i], [&](Index j) {
+        if (particles.body[j] != &b && (particles.pos[j] - particles.pos[i]).squaredNorm() < reach2) near.push_back(j);
       });
       if (near.empty()) continue;  // no pull: the particle stays
       const auto phi = [&](const Vec3& q) {
         double sum = 0.0;
         for (Index j : near) {
-          const double d2 = (q - p_pos[j]).squaredNorm();
+          const double d2 = (q - particles.pos[j]).squaredNorm();
           if (d2 < r_eff2) sum += 1.0 / std::max(d2, floor2);
         }
         return sum;
       };
-      double best = phi(p_pos[i]);
+      double best = phi(particles.pos[i]);
       // Neighbours are sorted ascending and only a strictly larger pull moves the particle:
       // ties stay, then lowest index, so runs are deterministic.
       for (Index u : b.topology->neighbors(cur)) {
@@ -220,80 +205,16 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
     stats.particle_moves += moved;
     // Jacobi: every destination was chosen from the same positions; now all move at once.
     for (std::size_t i = 0; i < n; ++i) {
-      Index& at = p_body[i]->particle_vertex[p_region[i]];
+      Index& at = particles.body[i]->particle_vertex[particles.region[i]];
       // Two particles approaching head-on along parallel paths pass each other and, under pure
       // Jacobi updates, swap back forever (seen on interlocking U shapes): with no_backtrack a
       // particle never returns to the vertex it just left within one step.
       if (settings.no_backtrack && p_dest[i] != at) p_left[i] = at;
       at = p_dest[i];
-      p_pos[i] = p_body[i]->positions[p_dest[i]];
+      particles.pos[i] = particles.body[i]->positions[p_dest[i]];
     }
   }
   stats.round_cap_hits = 1;
-}
-
-void SensorWorld::Impl::flagBySensors(double r_eff, StepStats& stats) {
-  const std::size_t n = p_pos.size();
-  double max_edge = 0.0, max_margin = 0.0, max_motion = 0.0;
-  for (const auto& kv : bodies) {
-    max_edge = std::max(max_edge, kv.second->mean_edge);
-    max_margin = std::max(max_margin, kv.second->margin);
-  }
-  p_motion.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    p_motion[i] = p_body[i]->vertexMotion(p_body[i]->particle_vertex[p_region[i]]);
-    max_motion = std::max(max_motion, p_motion[i]);
-  }
-  const double max_mu = settings.mu_edge_factor * max_edge + 2.0 * max_margin + settings.motion_factor * max_motion;
-  grid.build(p_pos, std::max(r_eff, max_mu));
-  const double r_eff2 = r_eff * r_eff;
-  for (std::size_t i = 0; i < n; ++i) {
-    const Body& bi = *p_body[i];
-    grid.forEachCandidate(p_pos[i], [&](Index j) {
-      const Body& bj = *p_body[j];
-      if (j <= i || &bj == &bi) return;
-      const double d2 = (p_pos[j] - p_pos[i]).squaredNorm();
-      if (d2 < r_eff2) ++stats.neighbor_pairs;
-      const double mu = settings.mu_edge_factor * std::max(bi.mean_edge, bj.mean_edge) + bi.margin + bj.margin +
-                        settings.motion_factor * std::max(p_motion[i], p_motion[j]);
-      if (d2 < mu * mu) {
-        FlaggedPair f;
-        const bool swap = bj.id < bi.id;
-        f.body_a = swap ? bj.id : bi.id;
-        f.region_a = swap ? p_region[j] : p_region[i];
-        f.body_b = swap ? bi.id : bj.id;
-        f.region_b = swap ? p_region[i] : p_region[j];
-        f.by_sensors = true;
-        result.flagged.push_back(f);
-      }
-    });
-  }
-}
-
-void SensorWorld::Impl::buildCandidates(StepStats& stats) {
-  std::vector<CandidatePair>& out = result.candidates;
-  detail::CandidateCounters counters;
-  const auto direction = [&](const Body& vb, Index vregion, const Body& tb, Index tregion) {
-    detail::regionVertexSet(vb.regions, vregion, settings.one_ring, vset);
-    detail::regionTriangleSet(tb.regions, tregion, settings.one_ring, tset);
-    keys.clear();
-    detail::collectCandidates(vb, vset, tb, tset, vb.margin + tb.margin, settings.motion_factor, pair_scratch, keys,
-                              counters);
-    for (std::uint64_t k : keys)
-      out.push_back({vb.id, static_cast<Index>(k >> 32), tb.id, static_cast<Index>(k & 0xFFFFFFFFu)});
-  };
-  for (const FlaggedPair& f : result.flagged) {
-    const Body& a = get(f.body_a);
-    const Body& b = get(f.body_b);
-    direction(a, f.region_a, b, f.region_b);
-    direction(b, f.region_b, a, f.region_a);
-  }
-  std::sort(out.begin(), out.end(), candidateLess);
-  out.erase(std::unique(out.begin(), out.end()), out.end());
-  stats.candidate_vertices = counters.vertices;
-  stats.candidate_triangles = counters.triangles;
-  stats.candidate_probes = counters.probes;
-  stats.candidate_pairs = out.size();
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -428,24 +349,17 @@ const StepResult& SensorWorld::step() {
 
   auto t = Clock::now();
   w.preparePartitions(st);
-  for (auto& kv : w.bodies) w.checkRepartition(*kv.second, st);
   st.ms_repartition = msSince(t);
+  for (auto& kv : w.bodies) w.refitAndCheck(*kv.second, st);
 
   st.bodies = w.bodies.size();
-  w.p_body.clear();
-  w.p_region.clear();
-  w.p_pos.clear();
+  detail::Particles& ps = w.particles;
+  ps.clear();
   for (auto& kv : w.bodies) {
     Body& b = *kv.second;
-    for (Index r = 0; r < b.regionCount(); ++r) {
-      w.p_body.push_back(&b);
-      w.p_region.push_back(r);
-      const Vec3 p = b.positions[b.particle_vertex[r]];
-      if (!p.allFinite() || p.cwiseAbs().maxCoeff() > kMaxCoordinate) checkFinite(b.positions, b.label());
-      w.p_pos.push_back(p);
-    }
+    for (Index r = 0; r < b.regionCount(); ++r) ps.add(&b, r, b.positions[b.particle_vertex[r]]);
   }
-  st.particles = w.p_pos.size();
+  st.particles = ps.size();
   if (st.particles == 0) {
     st.ms_total = msSince(t_start);
     return res;
@@ -453,56 +367,41 @@ const StepResult& SensorWorld::step() {
   const double r_eff = w.rEff();
   st.r_eff = r_eff;
 
-  t = Clock::now();
-  w.moveParticles(st, r_eff);
-  st.ms_sensors = msSince(t);
+  // Flagging::Bounds is the ablation with the sensor stage switched off: the particles stay put.
+  if (w.settings.flagging != Flagging::Bounds) {
+    t = Clock::now();
+    w.moveParticles(st, r_eff);
+    st.ms_sensors = msSince(t);
+  }
 
   t = Clock::now();
-  const bool bounds = w.settings.flagging == Flagging::SensorsAndBounds;
-  w.flagBySensors(r_eff, st);
-  detail::BoundsCounters bc;
-  if (bounds) {
+  if (w.settings.flagging == Flagging::Sensors) {
+    // The thesis's flag-only mode: particles closer than μ flag regions; candidate sets are the
+    // flagged regions (+ ring).
+    detail::flagByParticles(ps, w.settings, r_eff, w.grid, res.flagged, st);
+    st.ms_flagging = msSince(t);
+    if (w.settings.build_candidates) {
+      t = Clock::now();
+      detail::thesisCandidates(res.flagged, [&](BodyId id) -> const Body& { return w.get(id); }, w.settings,
+                               w.thesis, res.candidates, st);
+      st.ms_candidates = msSince(t);
+    }
+  } else {
     std::vector<Body*> ordered;
-    for (auto& kv : w.bodies) {
-      detail::refitBounds(*kv.second);
-      ordered.push_back(kv.second.get());
-    }
-    // The bounds layer flags region pairs and, in the same descent, yields the candidate pairs.
-    const auto t_collect = Clock::now();
-    double max_edge = 0.0;
-    for (const Body* b : ordered) max_edge = std::max(max_edge, b->mean_edge);
-    detail::collectByBounds(ordered, w.settings.motion_factor, 0.5 * w.settings.mu_edge_factor * max_edge,
-                            res.flagged, res.candidates, bc);
-    st.ms_candidates = msSince(t_collect);
+    for (auto& kv : w.bodies) ordered.push_back(kv.second.get());
+    detail::CullParams params;
+    params.motion_factor = w.settings.motion_factor;
+    params.use_sensors = w.settings.flagging == Flagging::SensorsAndBounds;
+    detail::cullAndCollect(ordered, params, res.flagged, res.candidates, st);
+    std::sort(res.flagged.begin(), res.flagged.end(), detail::flaggedLess);
+    st.ms_flagging = msSince(t) - st.ms_candidates;
+    st.candidate_pairs = res.candidates.size();
+    if (!w.settings.build_candidates) res.candidates.clear();
   }
-  std::sort(res.flagged.begin(), res.flagged.end(), flaggedLess);
-  std::size_t keep = 0;
-  for (std::size_t i = 0; i < res.flagged.size(); ++i) {
-    if (keep > 0 && !flaggedLess(res.flagged[keep - 1], res.flagged[i])) {
-      res.flagged[keep - 1].by_sensors |= res.flagged[i].by_sensors;
-      res.flagged[keep - 1].by_bounds |= res.flagged[i].by_bounds;
-    } else {
-      res.flagged[keep++] = res.flagged[i];
-    }
-  }
-  res.flagged.resize(keep);
-  st.flagged_pairs = keep;
+  st.flagged_pairs = res.flagged.size();
   for (const FlaggedPair& f : res.flagged) {
     if (f.by_sensors) ++st.flagged_by_sensors;
     else ++st.flagged_by_bounds_only;
-  }
-  st.ms_flagging = msSince(t) - st.ms_candidates;
-
-  if (bounds) {
-    st.candidate_vertices = bc.vertices;
-    st.candidate_triangles = bc.triangles;
-    st.candidate_probes = bc.probes;
-    st.candidate_pairs = res.candidates.size();
-    if (!w.settings.build_candidates) res.candidates.clear();
-  } else if (w.settings.build_candidates) {
-    t = Clock::now();
-    w.buildCandidates(st);
-    st.ms_candidates = msSince(t);
   }
   st.ms_total = msSince(t_start);
   return res;

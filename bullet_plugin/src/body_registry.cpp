@@ -11,7 +11,7 @@ namespace psc::bullet::detail {
 namespace {
 
 // Node positions read in place: m_x is the predicted position once predictMotion has run, m_q the
-// position before it (BULLET_INTEGRATION.md).
+// position before it (docs/BULLET.md, "A step of a soft-rigid world").
 psc::PositionView nodeView(const btSoftBody& body, bool previous) {
   const btSoftBody::Node& first = body.m_nodes[0];
   const btScalar* xyz = previous ? first.m_q.m_floats : first.m_x.m_floats;

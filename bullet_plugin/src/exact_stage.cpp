@@ -1,5 +1,8 @@
 #include "exact_stage.h"
 
+#include "psc/bullet/exact.h"
+#include "psc/error.h"
+
 // CollideVF_SS leaves its projection point uninitialised when the face is degenerate (it then
 // never reads it); GCC's -Wmaybe-uninitialized sees that once the header is inlined here, and it
 // reports at the header's lines, so the region must enclose Bullet's first inclusion in this file.
@@ -9,31 +12,290 @@
 #include <BulletSoftBody/btSoftBodyInternals.h>
 #pragma GCC diagnostic pop
 
+#include <algorithm>
 #include <cassert>
+#include <cmath>
+#include <vector>
 
-namespace psc::bullet::detail {
+namespace psc::bullet {
+namespace {
 
-void collideCandidates(btSoftBody& node_body, btSoftBody& face_body, const psc::CandidatePair* first,
-                       const psc::CandidatePair* last, ExactCounters& counters) {
-  if (first == last) return;
-  btSoftColliders::CollideVF_SS collide;
-  collide.mrg = node_body.getCollisionShape()->getMargin() + face_body.getCollisionShape()->getMargin();
-  collide.psb[0] = &node_body;
-  collide.psb[1] = &face_body;
-  // CollideVF_SS::Process only reads the leaves' data pointers, so two stub leaves stand in for
-  // the trees' leaves (verified to reproduce Bullet's contacts field for field).
-  btDbvtNode node_leaf{};
-  btDbvtNode face_leaf{};
+Vec3 toVec(const btVector3& v) { return {double(v.x()), double(v.y()), double(v.z())}; }
+btVector3 toBt(const Vec3& v) { return btVector3(btScalar(v.x()), btScalar(v.y()), btScalar(v.z())); }
+
+/// The face half of Bullet's ProjectOrigin(a, b, c, prj, sqd) (btSoftBodyInternals.h), the same
+/// operations in the same order (so the same bits), also reporting whether Bullet's size
+/// thresholds skipped something that could hold the closest point: the face (|q|² ≤ SIMD_EPSILON)
+/// or, when the projection fell outside, an edge (|d|² ≤ SIMD_EPSILON).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+inline void bulletProjectOrigin(const btVector3& a, const btVector3& b, const btVector3& c, btVector3& prj,
+                                btScalar& sqd, bool& skipped) {
+  const btVector3& q = btCross(b - a, c - a);
+  const btScalar m2 = q.length2();
+  if (m2 > SIMD_EPSILON) {
+    const btVector3 n = q / btSqrt(m2);
+    const btScalar k = btDot(a, n);
+    const btScalar k2 = k * k;
+    if (k2 < sqd) {
+      const btVector3 p = n * k;
+      if ((btDot(btCross(a - p, b - p), q) > 0) && (btDot(btCross(b - p, c - p), q) > 0) &&
+          (btDot(btCross(c - p, a - p), q) > 0)) {
+        prj = p;
+        sqd = k2;
+      } else {
+        skipped = !((b - a).length2() > SIMD_EPSILON) || !((c - b).length2() > SIMD_EPSILON) ||
+                  !((a - c).length2() > SIMD_EPSILON);
+        ProjectOrigin(a, b, prj, sqd);
+        ProjectOrigin(b, c, prj, sqd);
+        ProjectOrigin(c, a, prj, sqd);
+      }
+    }
+  } else {
+    skipped = true;
+  }
+}
+#pragma GCC diagnostic pop
+
+/// What every exact test needs of one pair, as CollideVF_SS sets it up.
+struct PairContext {
+  const btSoftBody* psb[2];  // node's body, face's body
+  btScalar mrg;              // sum of the collision margins
+};
+
+/// The fields CollideVF_SS fills after its distance test, for weights w and normal `normal`.
+/// False (no contact) when neither side can move, as in Bullet.
+bool fillContact(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
+                 const btVector3& w, const btVector3& normal, btScalar margin, btSoftBody::SContact& c) {
+  const btSoftBody::Node* n[] = {face.m_n[0], face.m_n[1], face.m_n[2]};
+  const btScalar ma = node.m_im;
+  btScalar mb = BaryEval(n[0]->m_im, n[1]->m_im, n[2]->m_im, w);
+  if ((n[0]->m_im <= 0) || (n[1]->m_im <= 0) || (n[2]->m_im <= 0)) mb = 0;
+  const btScalar ms = ma + mb;
+  if (!(ms > 0)) return false;
+  c.m_normal = normal;
+  c.m_margin = margin;
+  c.m_node = const_cast<btSoftBody::Node*>(&node);
+  c.m_face = const_cast<btSoftBody::Face*>(&face);
+  c.m_weights = w;
+  c.m_friction = btMax(ctx.psb[0]->m_cfg.kDF, ctx.psb[1]->m_cfg.kDF);
+  c.m_cfm[0] = ma / ms * ctx.psb[0]->m_cfg.kSHR;
+  c.m_cfm[1] = mb / ms * ctx.psb[1]->m_cfg.kSHR;
+  return true;
+}
+
+/// The node's motion relative to the face's material point with weights w over the step.
+Vec3 relativeMotion(const btSoftBody::Node& node, const btSoftBody::Face& face, const std::array<double, 3>& w) {
+  Vec3 face_motion = Vec3::Zero();
+  for (int i = 0; i < 3; ++i) face_motion += w[i] * (toVec(face.m_n[i]->m_x) - toVec(face.m_n[i]->m_q));
+  return (toVec(node.m_x) - toVec(node.m_q)) - face_motion;
+}
+
+Vec3 facePoint(const btSoftBody::Face& face, const std::array<double, 3>& w, bool previous) {
+  Vec3 p = Vec3::Zero();
+  for (int i = 0; i < 3; ++i) p += w[i] * toVec(previous ? face.m_n[i]->m_q : face.m_n[i]->m_x);
+  return p;
+}
+
+/// The unit normal of the face at its current positions, or zero when it is degenerate relative
+/// to its own size.
+Vec3 faceNormal(const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 n = (b - a).cross(c - a);
+  const double l2 = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
+  const double n2 = n.squaredNorm();
+  return n2 > 1e-24 * l2 * l2 ? Vec3(n / std::sqrt(n2)) : Vec3::Zero();
+}
+
+/// A unit normal for a node that lies on the face (no direction from the distance): the face's
+/// normal towards the side the node was on at the step's start (else against its relative motion);
+/// a degenerate face: against the relative motion, else perpendicular to the face's longest edge.
+Vec3 normalWithoutDistance(const btSoftBody::Node& node, const btSoftBody::Face& face,
+                           const std::array<double, 3>& w) {
+  const Vec3 a = toVec(face.m_n[0]->m_x), b = toVec(face.m_n[1]->m_x), c = toVec(face.m_n[2]->m_x);
+  const Vec3 motion = relativeMotion(node, face, w);
+  Vec3 n = faceNormal(a, b, c);
+  if (n != Vec3::Zero()) {
+    const double side = n.dot(toVec(node.m_q) - facePoint(face, w, true));
+    if (side < 0.0 || (side == 0.0 && n.dot(motion) > 0.0)) n = -n;
+    return n;
+  }
+  const double m = motion.norm();
+  if (m > 0.0) return -motion / m;
+  Vec3 e = b - a;
+  if ((c - b).squaredNorm() > e.squaredNorm()) e = c - b;
+  if ((a - c).squaredNorm() > e.squaredNorm()) e = a - c;
+  if (e == Vec3::Zero()) return Vec3::UnitZ();
+  Eigen::Index axis = 0;
+  e.cwiseAbs().minCoeff(&axis);
+  return e.cross(Vec3::Unit(axis)).normalized();
+}
+
+/// Bullet's CollideVF_SS decision and contact (Robust = false), or Robust's (true).
+ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::Node& node,
+                         const btSoftBody::Face& face, btSoftBody::SContact& contact) {
+  const btVector3 o = node.m_x;
+  btVector3 p(0, 0, 0);  // read only when d was set, i.e. together with p
+  btScalar d = SIMD_INFINITY;
+  bool skipped = false;
+  bulletProjectOrigin(face.m_n[0]->m_x - o, face.m_n[1]->m_x - o, face.m_n[2]->m_x - o, p, d, skipped);
+  const btScalar m = ctx.mrg + (o - node.m_q).length() * 2;
+  if (d < (m * m)) {
+    if (!robust || d > 0) {
+      const btSoftBody::Node* n[] = {face.m_n[0], face.m_n[1], face.m_n[2]};
+      const btVector3 w = BaryCoord(n[0]->m_x, n[1]->m_x, n[2]->m_x, p + o);
+      return fillContact(ctx, node, face, w, p / -btSqrt(d), m, contact) ? ContactKind::Bullet : ContactKind::None;
+    }
+  } else if (!robust || !skipped) {
+    return ContactKind::None;
+  }
+  // Bullet skipped the face or an edge as too small, or found the node exactly on the face.
+  const Vec3 po = toVec(o);
+  const ClosestPoint cp = closestPointOnTriangle(po, toVec(face.m_n[0]->m_x), toVec(face.m_n[1]->m_x),
+                                                 toVec(face.m_n[2]->m_x));
+  const double radius = double(m);
+  if (!(cp.distance2 < radius * radius)) return ContactKind::None;
+  const Vec3 away = po - facePoint(face, cp.weights, false);
+  const double length = away.norm();
+  const Vec3 normal = length > 1e-9 * radius ? Vec3(away / length) : normalWithoutDistance(node, face, cp.weights);
+  const btVector3 w{btScalar(cp.weights[0]), btScalar(cp.weights[1]), btScalar(cp.weights[2])};
+  return fillContact(ctx, node, face, w, toBt(normal), m, contact) ? ContactKind::Robust : ContactKind::None;
+}
+
+/// Continuous: a node that passed through the face during the step (and ends behind it) gets a
+/// contact back to the side it came from, replacing the discrete one; otherwise Robust.
+ContactKind continuousTest(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
+                           btSoftBody::SContact& contact) {
+  const ContactKind discrete = discreteTest(true, ctx, node, face, contact);
+  const std::array<Vec3, 4> start{toVec(node.m_q), toVec(face.m_n[0]->m_q), toVec(face.m_n[1]->m_q),
+                                  toVec(face.m_n[2]->m_q)};
+  const std::array<Vec3, 4> end{toVec(node.m_x), toVec(face.m_n[0]->m_x), toVec(face.m_n[1]->m_x),
+                                toVec(face.m_n[2]->m_x)};
+  const std::optional<Crossing> crossing = firstCrossing(start, end);
+  if (!crossing) return discrete;
+  const std::array<double, 3>& w = crossing->weights;
+  // The normal: the face's at the end of the step (else at the crossing, else at the start),
+  // towards the side the node started on; a node starting in the plane: against its motion.
+  Vec3 n = faceNormal(end[1], end[2], end[3]);
+  const auto at = [&](int i, double t) { return Vec3(start[i] + t * (end[i] - start[i])); };
+  if (n == Vec3::Zero()) n = faceNormal(at(1, crossing->t), at(2, crossing->t), at(3, crossing->t));
+  if (n == Vec3::Zero()) n = faceNormal(start[1], start[2], start[3]);
+  const Vec3 motion = relativeMotion(node, face, w);
+  if (n == Vec3::Zero()) {
+    if (motion == Vec3::Zero()) return discrete;
+    n = -motion.normalized();
+  }
+  const double side0 = n.dot(start[0] - facePoint(face, w, true));
+  if (side0 < 0.0 || (side0 == 0.0 && n.dot(motion) > 0.0)) n = -n;
+  // Only a node that ends the step through the face: one that came back needs no push.
+  if (!(n.dot(end[0] - facePoint(face, w, false)) < 0.0)) return discrete;
+  const btVector3 bw{btScalar(w[0]), btScalar(w[1]), btScalar(w[2])};
+  btSoftBody::SContact crossing_contact;
+  if (!fillContact(ctx, node, face, bw, toBt(n), ctx.mrg, crossing_contact)) return discrete;
+  contact = crossing_contact;
+  return ContactKind::Crossing;
+}
+
+PairContext contextOf(const btSoftBody& node_body, const btSoftBody& face_body) {
+  return {{&node_body, &face_body},
+          node_body.getCollisionShape()->getMargin() + face_body.getCollisionShape()->getMargin()};
+}
+
+}  // namespace
+
+const char* toString(ExactTest test) {
+  switch (test) {
+    case ExactTest::Bullet: return "bullet";
+    case ExactTest::Robust: return "robust";
+    case ExactTest::Continuous: return "continuous";
+  }
+  return "?";
+}
+
+ExactTest exactTestFromString(const std::string& text) {
+  for (ExactTest t : {ExactTest::Bullet, ExactTest::Robust, ExactTest::Continuous})
+    if (text == toString(t)) return t;
+  throw psc::Error(psc::ErrorCode::InvalidArgument,
+                   "exact test '" + text + "' is not one of bullet, robust, continuous");
+}
+
+ContactKind exactContact(ExactTest test, const btSoftBody& node_body, const btSoftBody::Node& node,
+                         const btSoftBody& face_body, const btSoftBody::Face& face, btSoftBody::SContact& contact) {
+  const PairContext ctx = contextOf(node_body, face_body);
+  switch (test) {
+    case ExactTest::Bullet: return discreteTest(false, ctx, node, face, contact);
+    case ExactTest::Robust: return discreteTest(true, ctx, node, face, contact);
+    case ExactTest::Continuous: return continuousTest(ctx, node, face, contact);
+  }
+  return ContactKind::None;
+}
+
+ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body,
+                              const psc::CandidatePair* first, const psc::CandidatePair* last) {
+  ExactCounts counts;
+  if (first == last) return counts;
   const int before = node_body.m_scontacts.size();
+  counts.tests = static_cast<std::size_t>(last - first);
+  if (test == ExactTest::Bullet) {
+    btSoftColliders::CollideVF_SS collide;
+    collide.mrg = node_body.getCollisionShape()->getMargin() + face_body.getCollisionShape()->getMargin();
+    collide.psb[0] = &node_body;
+    collide.psb[1] = &face_body;
+    // CollideVF_SS::Process only reads the leaves' data pointers, so two stub leaves stand in for
+    // the trees' leaves (verified to reproduce Bullet's contacts field for field).
+    btDbvtNode node_leaf{};
+    btDbvtNode face_leaf{};
+    for (const psc::CandidatePair* c = first; c != last; ++c) {
+      assert(static_cast<int>(c->vertex) < node_body.m_nodes.size());
+      assert(static_cast<int>(c->triangle) < face_body.m_faces.size());
+      node_leaf.data = &node_body.m_nodes[static_cast<int>(c->vertex)];
+      face_leaf.data = &face_body.m_faces[static_cast<int>(c->triangle)];
+      collide.Process(&node_leaf, &face_leaf);
+    }
+    counts.contacts = static_cast<std::size_t>(node_body.m_scontacts.size() - before);
+    return counts;
+  }
+  const PairContext ctx = contextOf(node_body, face_body);
+  btSoftBody::SContact contact;
+  std::vector<const btSoftBody::Node*> crossed;  // nodes with a crossing contact in this call
+  std::vector<char> is_crossing;                 // per contact pushed in this call
   for (const psc::CandidatePair* c = first; c != last; ++c) {
     assert(static_cast<int>(c->vertex) < node_body.m_nodes.size());
     assert(static_cast<int>(c->triangle) < face_body.m_faces.size());
-    node_leaf.data = &node_body.m_nodes[static_cast<int>(c->vertex)];
-    face_leaf.data = &face_body.m_faces[static_cast<int>(c->triangle)];
-    collide.Process(&node_leaf, &face_leaf);
+    const btSoftBody::Node& node = node_body.m_nodes[static_cast<int>(c->vertex)];
+    const btSoftBody::Face& face = face_body.m_faces[static_cast<int>(c->triangle)];
+    const ContactKind kind = test == ExactTest::Robust ? discreteTest(true, ctx, node, face, contact)
+                                                       : continuousTest(ctx, node, face, contact);
+    if (kind == ContactKind::None) continue;
+    node_body.m_scontacts.push_back(contact);
+    counts.robust += kind == ContactKind::Robust;
+    if (test == ExactTest::Continuous) {
+      is_crossing.push_back(kind == ContactKind::Crossing);
+      if (kind == ContactKind::Crossing) {
+        ++counts.crossings;
+        crossed.push_back(&node);
+      }
+    }
   }
-  counters.tests += static_cast<std::size_t>(last - first);
-  counters.contacts += static_cast<std::size_t>(node_body.m_scontacts.size() - before);
+  if (!crossed.empty()) {
+    // A node that passed through a face of this body keeps only its crossing contacts against the
+    // body: its discrete ones were decided from behind the surface and would push it further in.
+    std::sort(crossed.begin(), crossed.end());
+    int out = before;
+    for (int i = before; i < node_body.m_scontacts.size(); ++i) {
+      const btSoftBody::SContact& sc = node_body.m_scontacts[i];
+      const bool keep = is_crossing[static_cast<std::size_t>(i - before)] ||
+                        !std::binary_search(crossed.begin(), crossed.end(), sc.m_node);
+      if (!keep) {
+        ++counts.dropped;
+        continue;
+      }
+      if (out != i) node_body.m_scontacts[out] = sc;
+      ++out;
+    }
+    node_body.m_scontacts.resize(out);
+  }
+  counts.contacts = static_cast<std::size_t>(node_body.m_scontacts.size() - before);
+  return counts;
 }
 
-}  // namespace psc::bullet::detail
+}  // namespace psc::bullet

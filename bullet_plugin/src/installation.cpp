@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cassert>
 #include <chrono>
+#include <string>
 #include <tuple>
 #include <utility>
 
@@ -19,12 +20,21 @@ namespace {
 
 constexpr int kSoft = SOFTBODY_SHAPE_PROXYTYPE;
 
+/// How the plugin tells that Bullet has started a new internal step. The sensors must step exactly
+/// once per internal (sub)step, after btSoftBody::predictMotion (m_x predicted, m_q previous) and
+/// before the step's first soft-soft pair is collided; a second dispatch in the same step (from the
+/// internal tick callback, or performDiscreteCollisionDetection() between steps) must not step them
+/// again. Bullet 3.24 gives a plugin installed on an existing world no per-world hook at that
+/// moment (docs/BULLET.md, "Once per step"): actions run once per step but after the dispatch, so a
+/// later dispatch would look like a new step; the pre-tick callback runs before predictMotion and
+/// is a single slot the program owns; the soft-body solver, which sees predictMotion, is fixed when
+/// the world is built; BT_PROFILE zones reach only a process-wide hook. What Bullet does give:
 /// btDiscreteDynamicsWorld::internalSingleStepSimulation sets btDispatcherInfo::m_stepCount to 0
-/// after predictUnconstraintMotion and before the collision dispatch, on every internal step, and
-/// nothing in Bullet 3.24 reads it. The plugin stores this value there once it has stepped the
-/// sensors, so "m_stepCount != kSensed" means exactly "a new step has predicted its motion and the
-/// sensors have not seen it yet" (a second dispatch within the step, e.g. from a tick callback,
-/// sees kSensed). The value spells "psc!".
+/// after predictUnconstraintMotion and before the dispatch, on every internal step, and Bullet 3.24
+/// never reads it. The plugin writes kSensed there once it has stepped the sensors, so
+/// "m_stepCount != kSensed" means exactly "a new step has predicted its motion and the sensors have
+/// not seen it yet". The value spells "psc!". A program that writes m_stepCount itself during a
+/// step would make the sensors step again within it.
 constexpr int kSensed = 0x70736321;
 
 btCollisionDispatcher& collisionDispatcherOf(btSoftRigidDynamicsWorld& world) {
@@ -60,6 +70,11 @@ std::pair<const psc::CandidatePair*, const psc::CandidatePair*> candidatesOf(
 
 Installation::Installation(btSoftRigidDynamicsWorld& world, const Settings& settings)
     : world_(world), dispatcher_(collisionDispatcherOf(world)), settings_(settings), sensors_(settings.sensors) {
+  if (settings.exact != ExactTest::Bullet && settings.exact != ExactTest::Robust &&
+      settings.exact != ExactTest::Continuous)
+    throw psc::Error(psc::ErrorCode::InvalidSettings,
+                     "psc::bullet::Settings::exact = " + std::to_string(static_cast<int>(settings.exact)) +
+                         " is not an ExactTest (Bullet, Robust or Continuous)");
   previous_ = detail::DispatcherAccess::contactCreateFunc(dispatcher_, kSoft, kSoft);
   if (dynamic_cast<const detail::SoftSoftCreateFunc*>(previous_) != nullptr)
     throw psc::Error(psc::ErrorCode::InvalidArgument,
@@ -123,13 +138,16 @@ void Installation::collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, p
   if (!collided_pairs_.insert(key).second) return;
   const auto start = std::chrono::steady_clock::now();
   const std::vector<psc::CandidatePair>& candidates = sensors_.lastResult().candidates;
-  detail::ExactCounters counters;
   const auto ab = candidatesOf(candidates, id_a, id_b);
-  detail::collideCandidates(a, b, ab.first, ab.second, counters);
+  const ExactCounts ab_counts = collideCandidates(settings_.exact, a, b, ab.first, ab.second);
   const auto ba = candidatesOf(candidates, id_b, id_a);
-  detail::collideCandidates(b, a, ba.first, ba.second, counters);
-  stats_.exact_tests += counters.tests;
-  stats_.contacts += counters.contacts;
+  const ExactCounts ba_counts = collideCandidates(settings_.exact, b, a, ba.first, ba.second);
+  for (const ExactCounts& counts : {ab_counts, ba_counts}) {
+    stats_.exact_tests += counts.tests;
+    stats_.contacts += counts.contacts;
+    stats_.robust_contacts += counts.robust;
+    stats_.crossing_contacts += counts.crossings;
+  }
   ++stats_.body_pairs;
   stats_.ms_exact += millisecondsSince(start);
 }

@@ -70,7 +70,7 @@ class Installation {
   void senseOncePerStep();
   bool sensedThisStep() const;
   /// Drops the cached algorithm of every soft-soft pair, so the dispatcher asks its create funcs
-  /// again (a pair keeps the algorithm it got first: BULLET_INTEGRATION.md).
+  /// again (a pair keeps the algorithm it got first, even after a new registration).
   void refreshSoftBodyPairs();
   /// Both directions of one body pair from the step's candidates, once per step.
   void collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, psc::BodyId id_b);

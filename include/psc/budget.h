@@ -1,4 +1,4 @@
-// How many sensor particles each body gets (ALGORITHM.md §2, thesis §3.1): convex parts from a
+// How many sensor particles each body gets (docs/METHOD.md §2, thesis §3.1): convex parts from a
 // convex decomposition (HACD), the shadow-cap estimate per part, capped by the number of other
 // parts in the scene that could touch it, at least 1, and a per-body override.
 #pragma once

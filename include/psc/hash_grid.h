@@ -1,5 +1,5 @@
 // Uniform hash grid over points, used to find the particles within R_eff (and within μ) of each
-// other without testing all pairs (ALGORITHM.md §4 [beyond]). Deterministic: results are sorted.
+// other without testing all pairs (docs/METHOD.md §4 [beyond]). Deterministic: results are sorted.
 #pragma once
 
 #include "psc/types.h"

@@ -1,6 +1,6 @@
 // The surface mesh as the core sees it: a topology built once (triangles, one-ring adjacency,
 // edges, connected components) and positions read in place through a strided view, so that a
-// step touches only the vertices it needs (ALGORITHM.md §1).
+// step touches only the vertices it needs (docs/METHOD.md §1).
 #pragma once
 
 #include "psc/types.h"

@@ -1,4 +1,4 @@
-// LBG vector quantization of a surface into connected regions (ALGORITHM.md §3, thesis §2.1.3,
+// LBG vector quantization of a surface into connected regions (docs/METHOD.md §3, thesis §2.1.3,
 // §3.2). One region per sensor particle.
 #pragma once
 

@@ -1,4 +1,4 @@
-// Region size estimators that decide when a deforming body is re-partitioned (ALGORITHM.md §6,
+// Region size estimators that decide when a deforming body is re-partitioned (docs/METHOD.md §7,
 // thesis §3.6, §5.1.6).
 #pragma once
 

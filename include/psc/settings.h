@@ -8,12 +8,17 @@
 namespace psc {
 
 enum class Flagging {
-  Sensors,           ///< thesis §3.5: particles of different bodies closer than μ flag their regions
-  SensorsAndBounds,  ///< [beyond] also flag region pairs whose boxes (+ margins and motion)
-                     ///< overlap, found through flat per-body / per-region / per-chunk boxes refit
-                     ///< every step; the candidate pairs then come from overlapping chunks, so no
-                     ///< contact inside the radius can be missed
+  /// Thesis §3.5, flag-only: particles of different bodies closer than μ flag their regions, and
+  /// the candidate sets are the flagged regions (+ one ring). Not complete: kept to be measured.
+  Sensors,
+  /// Default. Flat per-body / per-region / per-chunk boxes refit every step give a coarse,
+  /// complete cull; the sensor particles then decide which region pairs, chunks, vertices and
+  /// triangles reach the exact test (see docs/METHOD.md). Never loses a contact inside the radius.
+  SensorsAndBounds,
+  /// Ablation of the default: the same pipeline with the sensor stage switched off (boxes only).
+  Bounds,
 };
+
 
 enum class AreaEstimator {
   FourDirectionWalk,  ///< thesis §3.6: walk ±X, ±Y in the particle's tangent plane, area = rectangle
@@ -33,9 +38,10 @@ struct SensorSettings {
   /// μ_geom = mu_edge_factor × the larger mean edge length of the two bodies (length units).
   /// Thesis §5.1.4 proves μ must be at least half the mean edge: factor ≥ 0.5.
   double mu_edge_factor = 1.0;
-  /// Effective radius of the pull, length units. 0 = auto: the sum of the two largest bounding
-  /// diameters (any two points of two touching bodies are closer than that, so their particles
-  /// always feel each other; the thesis uses the largest distance between initial particles).
+  /// Effective radius of the pull, length units. 0 = auto, recomputed every step: twice the
+  /// largest region box diagonal (two touching regions have their particles closer than the sum
+  /// of their diameters, so they always feel each other, and each particle only looks at its
+  /// neighbourhood; the thesis uses the largest distance between initial particles).
   /// Always clamped above the largest μ.
   double r_eff = 0.0;
   /// Movement rounds per step before giving up (≥ 1); a hit is counted in StepStats.

@@ -45,8 +45,8 @@ struct FlaggedPair {
   Index region_a = 0;
   BodyId body_b = kInvalidBody;
   Index region_b = 0;
-  bool by_sensors = false;  ///< particles closer than μ (thesis)
-  bool by_bounds = false;   ///< bounding spheres overlap ([beyond])
+  bool by_sensors = false;  ///< Flagging::Sensors: particles closer than μ (thesis §3.5)
+  bool by_bounds = false;   ///< default / Bounds: the grown boxes overlap and the sensor axis did not separate them
   bool operator==(const FlaggedPair& o) const {
     return body_a == o.body_a && region_a == o.region_a && body_b == o.body_b && region_b == o.region_b &&
            by_sensors == o.by_sensors && by_bounds == o.by_bounds;
@@ -83,9 +83,17 @@ struct StepStats {
   std::size_t round_cap_hits = 0;    ///< 1 when max_rounds stopped the movement before it was stable
   std::size_t particle_moves = 0;    ///< hops made, summed over particles and rounds
   std::size_t neighbor_pairs = 0;    ///< particle pairs of different bodies within R_eff (last round)
-  std::size_t flagged_pairs = 0;
-  std::size_t flagged_by_sensors = 0;
-  std::size_t flagged_by_bounds_only = 0;  ///< flagged only because of the bounding spheres
+  std::size_t flagged_pairs = 0;           ///< region pairs that reach the candidate stage
+  std::size_t flagged_by_sensors = 0;      ///< Flagging::Sensors: flagged by particles within μ
+  std::size_t flagged_by_bounds_only = 0;  ///< default / Bounds: flagged by the boxes (and not separated)
+  // The default midphase (Flagging::SensorsAndBounds and its ablation Flagging::Bounds):
+  std::size_t body_pairs = 0;              ///< body pairs whose grown boxes overlap
+  std::size_t region_pairs = 0;            ///< region pairs whose grown boxes overlap
+  std::size_t region_pairs_separated = 0;  ///< of those: proved apart along their sensor axis
+  std::size_t chunks_in = 0;               ///< chunks reaching the other region's box (per region pair)
+  std::size_t chunks_dropped = 0;          ///< of those: outside the sensor slab
+  std::size_t chunk_pairs = 0;             ///< chunk pairs examined
+  std::size_t vertices_dropped = 0;        ///< vertices dropped by the sensor slab inside chunk pairs
   std::size_t candidate_vertices = 0;      ///< vertices examined (per flagged pair or chunk pair and direction)
   std::size_t candidate_triangles = 0;     ///< triangles examined (likewise)
   std::size_t candidate_probes = 0;        ///< (vertex, triangle) box tests made to find them
@@ -93,7 +101,8 @@ struct StepStats {
   std::size_t repartitions = 0;            ///< bodies re-partitioned this step
   double r_eff = 0.0;                      ///< R_eff used this step (length units)
   double ms_sensors = 0.0;                 ///< particle movement (wall clock)
-  double ms_flagging = 0.0;                ///< flagging incl. region bounds
+  double ms_refit = 0.0;                   ///< refit of the body / region / chunk boxes
+  double ms_flagging = 0.0;                ///< pairing bodies and regions, the sensors' decisions
   double ms_candidates = 0.0;              ///< candidate pairs
   double ms_repartition = 0.0;             ///< repartition checks and repartitions
   double ms_total = 0.0;

@@ -1,4 +1,4 @@
-// Exact brute-force ground truth for soft-soft vertex-face contacts (BENCHMARK.md): node v of body
+// Exact brute-force ground truth for soft-soft vertex-face contacts (docs/BENCHMARK.md): node v of body
 // A and face t of body B ≠ A are in contact when the exact distance from x_v to triangle t is
 // below a radius, strict = margin_A + margin_B, full = strict + 2·|x_v − q_v| (Bullet's
 // CollideVF_SS acceptance). Both directions. Independent of the plugin and of the core: it shares

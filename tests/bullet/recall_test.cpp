@@ -1,5 +1,5 @@
 // Recall of the plugin and of Bullet's default VF_SS pipeline against the exact brute-force ground
-// truth (BENCHMARK.md), on small versions of the recall scenes. Both are measured in the same
+// truth (docs/BENCHMARK.md), on small versions of the recall scenes. Both are measured in the same
 // process on the same scene; each against the truth of its own trajectory, at the moment of the
 // dispatch (positions predicted, soft solve not yet run).
 #include "ground_truth.h"
@@ -81,6 +81,9 @@ void report(Scene scene, const Run& psc, const Run& bullet) {
 struct Floors {
   double strict = 1.0;
   double full = 0.999;
+  /// Steps whose particle movement stopped at SensorSettings::max_rounds: 0 measured on every scene
+  /// but the pile (5 of 150 steps, while the bodies settle); the pile's bound is 5% of its steps.
+  std::size_t round_cap_hits = 0;
 };
 
 void checkScene(Scene scene, Floors floors) {
@@ -96,11 +99,16 @@ void checkScene(Scene scene, Floors floors) {
   EXPECT_GE(psc.meter.strictRecall(), floors.strict) << psc.meter.missedStrict() << " strict contacts missed";
   EXPECT_GE(psc.meter.fullRecall(), floors.full) << psc.meter.missedFull() << " full-radius contacts missed";
   EXPECT_GE(psc.meter.pairRecall(), 1.0);
+  EXPECT_LE(psc.round_cap_hits, floors.round_cap_hits);
 }
 
 TEST(Recall, TwoSpheresHeadOn) { checkScene(Scene::HeadOn, {}); }
 TEST(Recall, ThreeSpheresInARow) { checkScene(Scene::ThreeInARow, {}); }
 TEST(Recall, TwoLinkedTori) { checkScene(Scene::Concave, {}); }
-TEST(Recall, MixedPileOfSevenBodies) { checkScene(Scene::Pile, {}); }
+TEST(Recall, MixedPileOfSevenBodies) {
+  Floors floors;
+  floors.round_cap_hits = 7;
+  checkScene(Scene::Pile, floors);
+}
 
 }  // namespace

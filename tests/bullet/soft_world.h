@@ -29,9 +29,13 @@ struct SoftParams {
   bool vf_ss = true;           ///< fCollision::VF_SS on (soft-soft collision in Bullet's default path)
 };
 
+/// Makes the world's dispatcher (e.g. one that dispatches pairs from several threads).
+using DispatcherFactory = std::function<std::unique_ptr<btCollisionDispatcher>(btCollisionConfiguration*)>;
+
 class SoftWorld {
  public:
-  explicit SoftWorld(double gravity = -10.0);
+  /// `make_dispatcher` empty: a plain btCollisionDispatcher.
+  explicit SoftWorld(double gravity = -10.0, const DispatcherFactory& make_dispatcher = {});
   ~SoftWorld();
   SoftWorld(const SoftWorld&) = delete;
   SoftWorld& operator=(const SoftWorld&) = delete;
@@ -50,7 +54,12 @@ class SoftWorld {
   void run(int n, const std::function<void()>& after_dispatch = {}, double dt = 1.0 / 60.0);
 
   btSoftBodyRigidBodyCollisionConfiguration config;
-  btCollisionDispatcher dispatcher{&config};
+
+ private:
+  std::unique_ptr<btCollisionDispatcher> own_dispatcher_;  // declared before `dispatcher`, which refers to it
+
+ public:
+  btCollisionDispatcher& dispatcher;
   btDbvtBroadphase broadphase;
   btSequentialImpulseConstraintSolver solver;
   btSoftRigidDynamicsWorld world{&dispatcher, &broadphase, &solver, &config};

@@ -6,6 +6,11 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <optional>
+#include <set>
+#include <tuple>
+
 namespace {
 
 using psc_test::Scene;
@@ -21,28 +26,65 @@ TEST(Stats, DescribeTheStep) {
   psc_test::buildScene(Scene::ThreeInARow, w);
   auto plugin = psc::bullet::install(w.world);
   EXPECT_EQ(plugin.stats().sensor_steps, 0u);
+  const auto& bodies = w.world.getSoftBodyArray();
   std::size_t steps_with_contacts = 0;
-  w.run(20, [&] {
+  for (std::uint64_t step = 1; step <= 20; ++step) {
+    std::size_t contacts = 0;
+    std::size_t contacts_outside_candidates = 0;
+    const auto start = std::chrono::steady_clock::now();
+    w.run(1, [&] {
+      contacts = std::size_t(softContacts(bodies));
+      // Every contact of the step comes from one of this step's candidate pairs.
+      std::set<std::tuple<psc::BodyId, psc::Index, psc::BodyId, psc::Index>> candidates;
+      for (const psc::CandidatePair& c : plugin.sensorWorld().lastResult().candidates)
+        candidates.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+      for (int b = 0; b < bodies.size(); ++b)
+        for (int i = 0; i < bodies[b]->m_scontacts.size(); ++i) {
+          const btSoftBody::SContact& c = bodies[b]->m_scontacts[i];
+          const std::optional<psc::BodyId> node_body = plugin.bodyId(bodies[b]);
+          std::optional<psc::BodyId> face_body;
+          psc::Index face = 0;
+          for (int o = 0; o < bodies.size(); ++o) {
+            const btSoftBody& other = *bodies[o];
+            if (other.m_faces.size() > 0 && c.m_face >= &other.m_faces[0] &&
+                c.m_face < &other.m_faces[0] + other.m_faces.size()) {
+              face_body = plugin.bodyId(&other);
+              face = psc::Index(c.m_face - &other.m_faces[0]);
+            }
+          }
+          const psc::Index node = psc::Index(c.m_node - &bodies[b]->m_nodes[0]);
+          if (!node_body || !face_body || candidates.count({*node_body, node, *face_body, face}) == 0)
+            ++contacts_outside_candidates;
+        }
+    });
+    const double wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     const psc::bullet::Stats& s = plugin.stats();
     EXPECT_TRUE(s.error.empty()) << s.error;
+    EXPECT_EQ(s.sensor_steps, step) << "one sensor step per simulation step, counted once";
     EXPECT_EQ(s.bodies, 3u);
     EXPECT_EQ(s.skipped_bodies, 0u);
-    EXPECT_EQ(s.particles, plugin.sensorWorld().particles().size());
-    EXPECT_GE(s.particles, 3u);
+    EXPECT_EQ(s.core.bodies, s.bodies) << "the core holds exactly the bodies the plugin registered";
+    // Each sphere is one convex part and two other parts can touch it: min(12, 2) = 2 particles each.
+    EXPECT_EQ(s.particles, 6u);
     EXPECT_GE(s.rounds, 1);
-    EXPECT_EQ(s.candidate_pairs, plugin.sensorWorld().lastResult().candidates.size());
-    EXPECT_EQ(s.flagged_pairs, plugin.sensorWorld().lastResult().flagged.size());
+    EXPECT_EQ(s.round_cap_hits, 0u);
     // Every candidate of a collided pair is tested once; here every candidate pair is collided.
     EXPECT_EQ(s.exact_tests, s.candidate_pairs);
-    EXPECT_EQ(s.contacts, std::size_t(softContacts(w.world.getSoftBodyArray())));
+    EXPECT_EQ(s.contacts, contacts) << "counted by the plugin vs found in m_scontacts";
+    EXPECT_EQ(contacts_outside_candidates, 0u);
     EXPECT_LE(s.contacts, s.exact_tests);
+    if (s.contacts > 0) {
+      EXPECT_GT(s.flagged_pairs, 0u) << "a contact needs a flagged region pair";
+    }
     EXPECT_EQ(s.fallback_pairs, 0u);
-    EXPECT_GE(s.ms_sensor_step, 0.0);
-    EXPECT_GE(s.ms_exact, 0.0);
-    EXPECT_EQ(s.core.particles, s.particles);
+    // Times of this step only (not summed over steps, not in other units): inside the step's wall time.
+    EXPECT_GT(s.ms_sensor_step, 0.0);
+    if (s.exact_tests > 0) {
+      EXPECT_GT(s.ms_exact, 0.0);
+    }
+    EXPECT_LT(s.ms_sensor_step + s.ms_exact, wall_ms);
     if (s.contacts > 0) ++steps_with_contacts;
-  });
-  EXPECT_EQ(plugin.stats().sensor_steps, 20u);
+  }
   EXPECT_GT(steps_with_contacts, 10u);
 }
 

@@ -5,7 +5,7 @@
 
 #include <gtest/gtest.h>
 
-#include <chrono>
+#include <algorithm>
 #include <cmath>
 
 namespace psc {
@@ -124,14 +124,36 @@ TEST(Budget, DecompositionIsDeterministic) {
   }
 }
 
-TEST(Budget, LargeMeshUsesTheDecimatedCopyAndStaysFast) {
+TEST(Budget, LargeMeshIsDecomposedThroughTheDecimatedCopy) {
+  // 50k vertices is far beyond what HACD handles directly (seconds at 1000 triangles): the parts
+  // come from the decimated copy and every vertex of the full mesh gets a label. How fast is the
+  // benchmark's business; here the result is checked.
   const TriMesh m = makeTorus(1.0, 0.3, 50000);
-  const auto t0 = std::chrono::steady_clock::now();
   const ConvexParts parts = decompose(m);
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  EXPECT_GE(parts.parts.size(), 4u);
-  // Measured about 0.05 s of CPU on the development machine; the bound leaves room for loaded CI.
-  EXPECT_LT(seconds, 5.0);
+  ASSERT_EQ(parts.part_of.size(), m.vertices.size());
+  // Measured 8 parts around the ring, centres at 0.84–1.04 from the axis, angular gaps ≤ 52°.
+  ASSERT_GE(parts.parts.size(), 4u);
+  EXPECT_LE(parts.parts.size(), 16u);
+  std::vector<std::size_t> labelled(parts.parts.size(), 0);
+  for (Index p : parts.part_of) {
+    ASSERT_LT(p, parts.parts.size());
+    ++labelled[p];
+  }
+  std::vector<double> angles;
+  for (std::size_t p = 0; p < parts.parts.size(); ++p) {
+    const ConvexPart& part = parts.parts[p];
+    EXPECT_EQ(part.vertex_count, labelled[p]) << "part " << p;
+    const double from_axis = std::hypot(part.center.x(), part.center.y());
+    EXPECT_GT(from_axis, 0.7) << "part " << p;  // on the tube's core circle (R = 1, r = 0.3)
+    EXPECT_LT(from_axis, 1.3) << "part " << p;
+    EXPECT_LT(std::abs(part.center.z()), 0.3) << "part " << p;
+    angles.push_back(std::atan2(part.center.y(), part.center.x()));
+  }
+  // The parts go all the way round: no gap of a quarter turn between neighbouring centres.
+  std::sort(angles.begin(), angles.end());
+  double widest = angles.front() + 2.0 * kPi - angles.back();
+  for (std::size_t i = 1; i < angles.size(); ++i) widest = std::max(widest, angles[i] - angles[i - 1]);
+  EXPECT_LT(widest, kPi / 2.0);
 }
 
 TEST(Budget, TwoConvexBodiesGetOneParticleEach) {

@@ -213,3 +213,24 @@ inline std::string messageOf(const std::function<void()>& f) {
 }
 
 }  // namespace psc::test
+
+#include "psc/shapes.h"
+
+#include <array>
+
+namespace psc::test {
+
+/// Thesis chapter 4, case 4: two U shapes (arm axes 1 apart, arms 1 long, tube radius 0.2, about
+/// 1200 vertices each) hooked like two chain links. a lies in the xy plane, its bend's centreline
+/// lowest at (0, -0.5, 0); b is turned into the yz plane and upside down (bend on top, arms at
+/// z = ±0.5 pointing down), so b's bend hooks through a's opening and a's bend passes under it.
+/// The tubes cross at x = z = 0 with b's inner surface `gap` above a's outer one.
+inline std::array<TriMesh, 2> interlockedUShapes(double gap) {
+  constexpr double kHalfTurn = 3.14159265358979323846;
+  TriMesh a = makeUShape(1.0, 1.0, 0.2, 1200);
+  TriMesh b = makeUShape(1.0, 1.0, 0.2, 1200);
+  b.rotate(Vec3(0, 1, 0), kHalfTurn / 2).rotate(Vec3(0, 0, 1), kHalfTurn).translate(Vec3(0.0, -0.6 + gap, 0.0));
+  return {a, b};
+}
+
+}  // namespace psc::test

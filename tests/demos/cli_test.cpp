@@ -42,42 +42,199 @@ fs::path scratch(const std::string& name) {
   return dir;
 }
 
+nlohmann::json readJson(const fs::path& path) {
+  std::ifstream in(path);
+  return nlohmann::json::parse(in);  // throws (and fails the test) on malformed JSON
+}
+
+double num(const nlohmann::json& run, const char* key) { return run.at(key).get<double>(); }
+
 TEST(DemoCli, JsonAndCsvHaveTheAgreedKeys) {
+  // Head-on spheres at 100 vertices touch from about step 20: 40 steps, all three pipelines.
   const fs::path dir = scratch("json");
-  const Outcome o = run("--scene head_on --resolution 60 --steps 3 --json " + (dir / "r.json").string() + " --csv " +
-                        (dir / "r.csv").string());
+  const Outcome o = run("--scene head_on --resolution 100 --steps 40 --pipeline all --json " +
+                        (dir / "r.json").string() + " --csv " + (dir / "r.csv").string());
   ASSERT_TRUE(o.exited && o.code == 0) << o.output;
-  std::ifstream in(dir / "r.json");
-  const nlohmann::json doc = nlohmann::json::parse(in);  // throws (and fails) on malformed JSON
+  const nlohmann::json doc = readJson(dir / "r.json");
   ASSERT_TRUE(doc.contains("machine"));
   for (const char* key : {"cores", "compiler", "build_type", "bullet_version", "bullet_precision"})
     EXPECT_TRUE(doc["machine"].contains(key)) << key;
   EXPECT_GT(doc["machine"]["cores"].get<int>(), 0);
   ASSERT_TRUE(doc["runs"].is_array());
-  const std::size_t expected_runs = SensorPipeline::available() ? 2 : 1;
-  ASSERT_EQ(doc["runs"].size(), expected_runs);
-  for (const nlohmann::json& r : doc["runs"]) {
+  const std::vector<std::string> expected = SensorPipeline::available()
+                                                ? std::vector<std::string>{"sensors", "bounds", "bullet"}
+                                                : std::vector<std::string>{"bullet"};
+  ASSERT_EQ(doc["runs"].size(), expected.size());
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    const nlohmann::json& r = doc["runs"][i];
     const std::string pipeline = r.at("pipeline").get<std::string>();
-    EXPECT_TRUE(pipeline == "sensors" || pipeline == "bullet") << pipeline;
+    EXPECT_EQ(pipeline, expected[i]);
+    const bool ours = pipeline != "bullet";
     for (const std::string& key : requiredRunKeys()) {
       const bool sensor_only = key == "flagged_pairs_per_step" || key == "particles";
-      if (sensor_only && pipeline == "bullet") continue;
+      if (sensor_only && !ours) continue;
       EXPECT_TRUE(r.contains(key)) << pipeline << " run lacks '" << key << "'";
     }
-    for (const char* key : {"recall_strict", "recall_full", "recall_strict_worst_step", "pair_recall"}) {
-      EXPECT_GE(r.at(key).get<double>(), 0.0) << key;
-      EXPECT_LE(r.at(key).get<double>(), 1.0) << key;
-    }
+    std::vector<const char*> timing = {"collision_ms_mean", "collision_ms_contact_median", "collision_ms_max",
+                                       "step_ms_max", "face_refit_ms_mean", "traversal_exact_ms_mean"};
+    if (ours)
+      for (const char* key : {"sensor_step_ms_mean", "exact_ms_mean", "particle_ms_mean", "refit_ms_mean",
+                              "flagging_ms_mean", "candidates_ms_mean", "repartition_ms_mean"})
+        timing.push_back(key);
+    for (const char* key : timing) ASSERT_TRUE(r.contains(key)) << pipeline << " run lacks '" << key << "'";
     EXPECT_EQ(r.at("scene").get<std::string>(), "head_on");
-    EXPECT_EQ(r.at("steps").get<int>(), 3);
+    EXPECT_EQ(r.at("steps").get<int>(), 40);
+    if (ours) {
+      EXPECT_EQ(r.at("flagging").get<std::string>(), pipeline == "sensors" ? "default" : "bounds");
+    }
+
+    // The spheres collide: truth and contacts, none outside the truth; ours lose nothing that
+    // Bullet's exact test would accept.
+    EXPECT_GT(r.at("truth_strict_contacts").get<long>(), 0) << pipeline;
+    EXPECT_GT(r.at("contacts_found").get<long>(), 0) << pipeline;
+    EXPECT_EQ(r.at("contacts_outside_truth").get<long>(), 0) << pipeline;
+    if (ours) {
+      EXPECT_EQ(num(r, "recall_strict_bullet_testable"), 1.0) << pipeline;
+    }
+
+    // Timing: warm-up min(10, 40 / 10); the contact median lies among the timed steps' collision
+    // times, which lie inside their step times; the mean is the sum of its parts.
+    EXPECT_EQ(r.at("warmup_steps").get<int>(), 4);
+    EXPECT_EQ(r.at("timed_steps").get<int>(), 36);
+    EXPECT_GT(r.at("contact_steps_timed").get<int>(), 0);
+    EXPECT_LE(r.at("contact_steps_timed").get<int>(), 36);
+    EXPECT_GT(num(r, "collision_ms_contact_median"), 0.0);
+    EXPECT_LE(num(r, "collision_ms_contact_median"), num(r, "collision_ms_max"));
+    EXPECT_LE(num(r, "collision_ms_max"), num(r, "step_ms_max") + 0.005);
+    EXPECT_LE(num(r, "collision_ms_mean"), num(r, "collision_ms_max"));
+    EXPECT_LE(num(r, "collision_ms_mean"), num(r, "step_ms_mean"));
+    double sum = num(r, "face_refit_ms_mean") + num(r, "traversal_exact_ms_mean");
+    if (ours) sum += num(r, "sensor_step_ms_mean") + num(r, "exact_ms_mean");
+    EXPECT_NEAR(num(r, "collision_ms_mean"), sum, 1e-9 + 1e-9 * sum) << pipeline;
+    if (ours) {
+      const double stages = num(r, "particle_ms_mean") + num(r, "refit_ms_mean") + num(r, "flagging_ms_mean") +
+                            num(r, "candidates_ms_mean") + num(r, "repartition_ms_mean");
+      EXPECT_LE(stages, num(r, "sensor_step_ms_mean") + 1e-6) << pipeline << ": the core's stages are parts of the sensor step";
+      EXPECT_GT(num(r, "exact_ms_mean"), 0.0) << pipeline;
+    } else {
+      EXPECT_GT(num(r, "traversal_exact_ms_mean"), 0.0);
+    }
+  }
+  if (expected.size() == 3) {
+    const nlohmann::json& sensors = doc["runs"][0];
+    const nlohmann::json& bounds = doc["runs"][1];
+    const nlohmann::json& bullet = doc["runs"][2];
+    // The ablation finds the very same contacts; the sensors never test more pairs.
+    EXPECT_EQ(bounds.at("contacts_found"), sensors.at("contacts_found"));
+    EXPECT_EQ(bounds.at("truth_strict_contacts"), sensors.at("truth_strict_contacts"));
+    EXPECT_LE(num(sensors, "exact_tests_per_step"), num(bounds, "exact_tests_per_step"));
+    // The ratios are of the collision means, and every run of the job carries them.
+    for (const nlohmann::json& r : doc["runs"]) {
+      EXPECT_DOUBLE_EQ(num(r, "ratio_bullet_over_sensors"),
+                       num(bullet, "collision_ms_mean") / num(sensors, "collision_ms_mean"));
+      EXPECT_DOUBLE_EQ(num(r, "ratio_bullet_over_bounds"),
+                       num(bullet, "collision_ms_mean") / num(bounds, "collision_ms_mean"));
+      EXPECT_DOUBLE_EQ(num(r, "ratio_bounds_over_sensors"),
+                       num(bounds, "collision_ms_mean") / num(sensors, "collision_ms_mean"));
+    }
   }
   std::ifstream csv(dir / "r.csv");
   std::string header, line;
   std::getline(csv, header);
   for (const std::string& key : requiredRunKeys()) EXPECT_NE(header.find(key), std::string::npos) << key;
+  std::vector<std::string> rows;
+  while (std::getline(csv, line))
+    if (!line.empty()) rows.push_back(line);
+  ASSERT_EQ(rows.size(), expected.size());
+  for (std::size_t i = 0; i < rows.size(); ++i)  // pipeline is the fifth column
+    EXPECT_NE(rows[i].find(",\"" + expected[i] + "\","), std::string::npos) << rows[i];
+}
+
+TEST(DemoCli, PipelineAndFlaggingChoices) {
+  if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
+  const fs::path dir = scratch("flagging");
+  const std::string scene = "--scene head_on --resolution 100 --steps 40 --truth none --no-penetration ";
+  const Outcome bounds = run(scene + "--pipeline bounds --json " + (dir / "bounds.json").string());
+  ASSERT_TRUE(bounds.exited && bounds.code == 0) << bounds.output;
+  const nlohmann::json b = readJson(dir / "bounds.json");
+  ASSERT_EQ(b["runs"].size(), 1u);
+  EXPECT_EQ(b["runs"][0].at("pipeline"), "bounds");
+  EXPECT_EQ(b["runs"][0].at("flagging"), "bounds");
+
+  const Outcome both = run(scene + "--json " + (dir / "both.json").string());  // --pipeline both is the default
+  ASSERT_TRUE(both.exited && both.code == 0) << both.output;
+  const nlohmann::json d = readJson(dir / "both.json");
+  ASSERT_EQ(d["runs"].size(), 2u);
+  EXPECT_EQ(d["runs"][0].at("pipeline"), "sensors");
+  EXPECT_EQ(d["runs"][1].at("pipeline"), "bullet");
+  EXPECT_EQ(d["runs"][0].at("flagging"), "default");
+
+  // The thesis's flag-only mode reaches the core: another candidate set, so other exact tests.
+  const Outcome thesis = run(scene + "--pipeline sensors --flagging thesis --json " + (dir / "thesis.json").string());
+  ASSERT_TRUE(thesis.exited && thesis.code == 0) << thesis.output;
+  const nlohmann::json t = readJson(dir / "thesis.json");
+  ASSERT_EQ(t["runs"].size(), 1u);
+  EXPECT_EQ(t["runs"][0].at("pipeline"), "sensors");
+  EXPECT_EQ(t["runs"][0].at("flagging"), "thesis");
+  EXPECT_GT(t["runs"][0].at("contacts_found").get<long>(), 0);
+  EXPECT_NE(num(t["runs"][0], "exact_tests_per_step"), num(d["runs"][0], "exact_tests_per_step"));
+  EXPECT_NE(thesis.output.find("Flagging::Sensors"), std::string::npos) << "the table says which flagging ran";
+
+  const Outcome no_sensors = run("--scene head_on --steps 1 --pipeline bounds --flagging thesis");
+  EXPECT_TRUE(no_sensors.exited);
+  EXPECT_EQ(no_sensors.code, 2) << no_sensors.output;
+  EXPECT_NE(no_sensors.output.find("has no sensors run"), std::string::npos) << no_sensors.output;
+  for (const char* bad : {"--pipeline sensor", "--pipeline boxes", "--flagging bounds"}) {
+    const Outcome o = run(std::string("--scene head_on --steps 1 ") + bad);
+    EXPECT_TRUE(o.exited) << bad;
+    EXPECT_NE(o.code, 0) << bad << "\n" << o.output;
+    EXPECT_NE(o.output.find(std::string(bad).substr(0, std::string(bad).find(' '))), std::string::npos)
+        << "the message names the option: " << o.output;
+  }
+}
+
+TEST(DemoCli, SweepPlotsCollisionMeanAgainstVertices) {
+  const fs::path dir = scratch("sweep");
+  const Outcome o = run("--scene tori_pile --bodies 2 --sweep resolution 80,160 --steps 6 --truth none "
+                        "--no-penetration --pipeline all --plot " + (dir / "p").string() + " --json " +
+                        (dir / "r.json").string());
+  ASSERT_TRUE(o.exited && o.code == 0) << o.output;
+  const nlohmann::json doc = readJson(dir / "r.json");
+  std::ifstream dat(dir / "p" / "sweep_resolution_tori_pile.dat");
+  ASSERT_TRUE(dat) << o.output;
+  std::string header;
+  std::getline(dat, header);
+  const std::vector<std::string> pipelines = SensorPipeline::available()
+                                                 ? std::vector<std::string>{"sensors", "bounds", "bullet"}
+                                                 : std::vector<std::string>{"bullet"};
+  for (const std::string& p : pipelines) EXPECT_NE(header.find(p + "_coll_mean"), std::string::npos) << header;
   std::size_t rows = 0;
-  while (std::getline(csv, line)) rows += !line.empty();
-  EXPECT_EQ(rows, expected_runs);
+  for (std::string line; std::getline(dat, line);) {
+    if (line.empty()) continue;
+    ++rows;
+    std::istringstream in(line);
+    std::size_t x = 0;
+    in >> x;
+    for (const std::string& p : pipelines) {
+      double coll = -1, step = -1, ns = -1;
+      in >> coll >> step >> ns;
+      ASSERT_FALSE(in.fail()) << line;
+      // The plotted point is the run's collision mean (6 decimals in the data file).
+      bool matched = false;
+      for (const nlohmann::json& r : doc["runs"])
+        if (r.at("pipeline") == p && r.at("resolution").get<std::size_t>() == x) {
+          matched = true;
+          EXPECT_NEAR(coll, num(r, "collision_ms_mean"), 1e-6) << p << " at " << x;
+          EXPECT_NEAR(ns, num(r, "collision_ms_mean") * 1e6 / num(r, "vertices"), 1e-5) << p << " at " << x;
+        }
+      EXPECT_TRUE(matched) << p << " at " << x;
+    }
+  }
+  EXPECT_EQ(rows, 2u);
+  if (std::system("gnuplot --version >/dev/null 2>&1") == 0) {
+    EXPECT_TRUE(fs::exists(dir / "p" / "sweep_resolution_tori_pile_collision_ms.png")) << o.output;
+    EXPECT_TRUE(fs::exists(dir / "p" / "sweep_resolution_tori_pile_ns_per_vertex.png")) << o.output;
+  }
 }
 
 TEST(DemoCli, WithoutTruthTheRecallKeysAreLeftOut) {
@@ -143,7 +300,17 @@ TEST(DemoCli, ValidMeshFileRunsAsScene8) {
   if (!fs::exists(cube)) GTEST_SKIP() << "assimp-testmodels not installed";
   const Outcome o = run("--mesh " + cube + " --steps 3 --resolution 100 --bodies 2");
   EXPECT_TRUE(o.exited && o.code == 0) << o.output;
-  EXPECT_NE(o.output.find("mesh"), std::string::npos) << o.output;
+  // A table row per pipeline: scene "mesh", 2 bodies, 3 steps.
+  const std::size_t pipelines = SensorPipeline::available() ? 2 : 1;
+  std::size_t rows = 0;
+  std::istringstream lines(o.output);
+  for (std::string line; std::getline(lines, line);) {
+    std::istringstream cells(line);
+    std::string scene, res, bodies, steps;
+    cells >> scene >> res >> bodies >> steps;
+    rows += scene == "mesh" && bodies == "2" && steps == "3";
+  }
+  EXPECT_EQ(rows, pipelines) << o.output;
 }
 
 TEST(DemoCli, FramesAndPlots) {

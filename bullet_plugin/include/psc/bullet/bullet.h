@@ -1,6 +1,7 @@
 // Umbrella header of psc::bullet, the Bullet 3.24 soft-body plugin of psc.
 #pragma once
 
+#include "psc/bullet/exact.h"
 #include "psc/bullet/plugin.h"
 #include "psc/bullet/precision.h"
 #include "psc/bullet/settings.h"

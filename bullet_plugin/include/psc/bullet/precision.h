@@ -1,6 +1,6 @@
 // Compile-time half of the precision guard. Bullet's float and double builds have different
 // layouts for every type that holds a btScalar, and mixing them links silently and corrupts memory
-// (BULLET_INTEGRATION.md). Every public header of psc::bullet includes this one, so a translation
+// (docs/BULLET.md). Every public header of psc::bullet includes this one, so a translation
 // unit whose Bullet precision differs from the plugin's stops here with a message. The link-time
 // half lives in src/precision_guard.cpp and in the precision tag of install().
 #pragma once

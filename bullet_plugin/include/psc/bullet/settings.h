@@ -20,6 +20,23 @@ enum class OptIn {
   Explicit,
 };
 
+/// The exact (node, face) test the plugin runs on each of the core's candidate pairs. Costs per
+/// test and what each guarantees: README "Exact tests"; the functions themselves: exact.h.
+enum class ExactTest {
+  /// Bullet's own btSoftColliders::CollideVF_SS, unchanged: the contacts of Bullet's default path.
+  /// It refuses every face with |cross|² ≤ SIMD_EPSILON (area below ~1.7e-4 units² in float).
+  Bullet,
+  /// Bullet's contact, bit for bit, wherever CollideVF_SS accepts the pair (except that a node
+  /// lying exactly on the face gets a finite normal instead of Bullet's 0/0); where Bullet's
+  /// arithmetic skipped the face or an edge as too small, the exact closest point computed in
+  /// double with relative thresholds, so no contact depends on the unit of length.
+  Robust,
+  /// Robust, plus a continuous test over the step (m_q → m_x, linear motion of the node and of
+  /// the face's nodes): a node that passes through the face during the step gets a contact that
+  /// pushes it back to the side it came from (instead of Bullet's, whose normal points through).
+  Continuous,
+};
+
 struct Settings {
   /// The core's settings (μ, R_eff, rounds, flagging, partitioning). `sensors.motion_factor` = 2
   /// matches the motion term of Bullet's CollideVF_SS acceptance radius; less lets the flagged
@@ -33,6 +50,9 @@ struct Settings {
   /// applies (collision groups and masks, the pair cache's overlap filter callback,
   /// btCollisionObject::checkCollideWith, deactivation). false: only dispatched pairs are collided.
   bool beyond_broadphase = true;
+  /// The exact test on the candidates. Continuous needs the candidates to include every pair whose
+  /// node's segment (m_q → m_x) meets the face's swept volume (exact.h, firstCrossing).
+  ExactTest exact = ExactTest::Bullet;
 };
 
 }  // namespace psc::bullet

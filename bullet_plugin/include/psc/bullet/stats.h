@@ -28,6 +28,8 @@ struct Stats {
   std::size_t fallback_pairs = 0;     ///< soft-soft pairs handed to Bullet's previous algorithm
   std::size_t exact_tests = 0;        ///< CollideVF_SS tests run (one per candidate of a dispatched pair)
   std::size_t contacts = 0;           ///< btSoftBody::SContacts produced
+  std::size_t robust_contacts = 0;    ///< of contacts: made where Bullet's test refuses (Settings::exact Robust/Continuous)
+  std::size_t crossing_contacts = 0;  ///< of contacts: nodes that passed through a face this step (Continuous)
   double ms_sensor_step = 0.0;        ///< body synchronisation + SensorWorld::step(), wall clock
   double ms_exact = 0.0;              ///< the exact stage, summed over the step's pairs, wall clock
   /// Non-empty when the core rejected this step (e.g. a non-finite node position): every pair then

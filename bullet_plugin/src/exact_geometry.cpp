@@ -1,0 +1,188 @@
+// The double-precision geometry of the Robust and Continuous exact tests (exact.h).
+#include "psc/bullet/exact.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace psc::bullet {
+namespace {
+
+/// A triangle is reduced to its edges when |ab × ac|² ≤ this × (longest edge²)², i.e. its height
+/// is below 1e-12 of its longest edge: the same rule as the demo's ground truth.
+constexpr double kDegenerateRelative = 1e-24;
+
+ClosestPoint closestOnSegment(const Vec3& p, const Vec3& a, const Vec3& b) {
+  const Vec3 ab = b - a;
+  const double len2 = ab.squaredNorm();
+  const double t = len2 > 0.0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
+  ClosestPoint r;
+  r.distance2 = (p - (a + t * ab)).squaredNorm();
+  r.weights = {1.0 - t, t, 0.0};
+  return r;
+}
+
+ClosestPoint fromWeights(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, double wa, double wb,
+                         double wc) {
+  ClosestPoint r;
+  r.weights = {wa, wb, wc};
+  r.distance2 = (p - (a * wa + b * wb + c * wc)).squaredNorm();
+  return r;
+}
+
+double maxEdge2(const Vec3& a, const Vec3& b, const Vec3& c) {
+  return std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
+}
+
+}  // namespace
+
+ClosestPoint closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 ab = b - a, ac = c - a;
+  const double n2 = ab.cross(ac).squaredNorm();
+  const double l2 = maxEdge2(a, b, c);
+  if (!(n2 > kDegenerateRelative * l2 * l2)) {
+    // Degenerate: the nearest of the three edges (a point-sized triangle gives a's distance).
+    ClosestPoint best = closestOnSegment(p, a, b);
+    ClosestPoint bc = closestOnSegment(p, b, c);
+    if (bc.distance2 < best.distance2) best = {bc.distance2, {0.0, bc.weights[0], bc.weights[1]}};
+    ClosestPoint ca = closestOnSegment(p, c, a);
+    if (ca.distance2 < best.distance2) best = {ca.distance2, {ca.weights[1], 0.0, ca.weights[0]}};
+    return best;
+  }
+  // Ericson, Real-Time Collision Detection §5.1.5, with the weights kept.
+  const Vec3 ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return fromWeights(p, a, b, c, 1.0, 0.0, 0.0);
+  const Vec3 bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return fromWeights(p, a, b, c, 0.0, 1.0, 0.0);
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
+    const double v = d1 / (d1 - d3);
+    return fromWeights(p, a, b, c, 1.0 - v, v, 0.0);
+  }
+  const Vec3 cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return fromWeights(p, a, b, c, 0.0, 0.0, 1.0);
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
+    const double w = d2 / (d2 - d6);
+    return fromWeights(p, a, b, c, 1.0 - w, 0.0, w);
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return fromWeights(p, a, b, c, 0.0, 1.0 - w, w);
+  }
+  const double denom = 1.0 / (va + vb + vc);
+  return fromWeights(p, a, b, c, va * denom, vb * denom, vc * denom);
+}
+
+namespace {
+
+/// f(t) = c[0] + c[1] t + c[2] t² + c[3] t³
+double cubic(const double c[4], double t) { return ((c[3] * t + c[2]) * t + c[1]) * t + c[0]; }
+
+/// Roots in (0, 1) of c0 + c1 t + c2 t², ascending; appended to out.
+void quadraticRootsInside(double c0, double c1, double c2, double* out, int& count) {
+  double r[2];
+  int n = 0;
+  if (c2 == 0.0) {
+    if (c1 != 0.0) r[n++] = -c0 / c1;
+  } else {
+    const double disc = c1 * c1 - 4.0 * c2 * c0;
+    if (disc >= 0.0) {
+      const double q = -0.5 * (c1 + std::copysign(std::sqrt(disc), c1));
+      r[n++] = q / c2;
+      if (q != 0.0) r[n++] = c0 / q;
+    }
+  }
+  if (n == 2 && r[1] < r[0]) std::swap(r[0], r[1]);
+  for (int i = 0; i < n; ++i)
+    if (r[i] > 0.0 && r[i] < 1.0 && (count == 0 || r[i] > out[count - 1])) out[count++] = r[i];
+}
+
+/// The root of f in [lo, hi], where f is monotone with f(lo), f(hi) of opposite signs: Newton's
+/// method kept inside the shrinking bracket (bisection when a step would leave it).
+double rootInPiece(const double c[4], double lo, double hi, double flo, double fhi) {
+  const bool rising = flo < 0.0;
+  double t = lo + (hi - lo) * (flo / (flo - fhi));  // secant start
+  if (!(t > lo && t < hi)) t = 0.5 * (lo + hi);
+  for (int k = 0; k < 100; ++k) {
+    const double ft = cubic(c, t);
+    if (ft == 0.0) return t;
+    if ((ft < 0.0) == rising) lo = t; else hi = t;
+    const double slope = (3.0 * c[3] * t + 2.0 * c[2]) * t + c[1];
+    double next = t - ft / slope;
+    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+    if (next <= lo || next >= hi || std::abs(next - t) <= 4.0 * std::numeric_limits<double>::epsilon()) return next;
+    t = next;
+  }
+  return t;
+}
+
+}  // namespace
+
+std::optional<Crossing> firstCrossing(const std::array<Vec3, 4>& start, const std::array<Vec3, 4>& end) {
+  // Relative to the triangle's first vertex: f(t) = (e1(t) × e2(t)) · r(t), each linear in t.
+  const Vec3 e1_0 = start[2] - start[1], e2_0 = start[3] - start[1], r_0 = start[0] - start[1];
+  const Vec3 e1_1 = end[2] - end[1], e2_1 = end[3] - end[1], r_1 = end[0] - end[1];
+  const Vec3 de1 = e1_1 - e1_0, de2 = e2_1 - e2_0, dr = r_1 - r_0;
+  const Vec3 n0 = e1_0.cross(e2_0);
+  const Vec3 n1 = e1_0.cross(de2) + de1.cross(e2_0);
+  const Vec3 n2 = de1.cross(de2);
+  const double c[4] = {n0.dot(r_0), n0.dot(dr) + n1.dot(r_0), n1.dot(dr) + n2.dot(r_0), n2.dot(dr)};
+  // Rounding of f is a few ulps of L³; values within tol are zero (a touch, or coplanar).
+  const double scale = std::sqrt(std::max({e1_0.squaredNorm(), e2_0.squaredNorm(), r_0.squaredNorm(),
+                                           e1_1.squaredNorm(), e2_1.squaredNorm(), r_1.squaredNorm()}));
+  if (!(scale > 0.0) || !std::isfinite(scale)) return std::nullopt;
+  const double tol = 64.0 * std::numeric_limits<double>::epsilon() * scale * scale * scale;
+  // Bernstein coefficients on [0, 1] bound f: all beyond ±tol on one side means no root.
+  const double b[4] = {c[0], c[0] + c[1] / 3.0, c[0] + (2.0 * c[1] + c[2]) / 3.0, c[0] + c[1] + c[2] + c[3]};
+  const double bmin = std::min({b[0], b[1], b[2], b[3]}), bmax = std::max({b[0], b[1], b[2], b[3]});
+  if (bmin > tol || bmax < -tol) return std::nullopt;
+  if (bmin >= -tol && bmax <= tol) return std::nullopt;  // coplanar all step: never changes side
+
+  // The swept triangle lies in the box of its six positions: a point whose segment's box misses
+  // it (by more than the inside tolerance) cannot meet it.
+  {
+    const Vec3 tri_lo = start[1].cwiseMin(start[2]).cwiseMin(start[3]).cwiseMin(end[1]).cwiseMin(end[2]).cwiseMin(end[3]);
+    const Vec3 tri_hi = start[1].cwiseMax(start[2]).cwiseMax(start[3]).cwiseMax(end[1]).cwiseMax(end[2]).cwiseMax(end[3]);
+    const double slack = 2.0 * kCrossingTolerance * (tri_hi - tri_lo).maxCoeff();
+    const Vec3 p_lo = start[0].cwiseMin(end[0]), p_hi = start[0].cwiseMax(end[0]);
+    if (((p_lo - tri_hi).array() > slack).any() || ((tri_lo - p_hi).array() > slack).any()) return std::nullopt;
+  }
+  // Monotone pieces of f between 0, the roots of f' in (0, 1), and 1.
+  double s[4] = {0.0};
+  int count = 1;
+  quadraticRootsInside(c[1], 2.0 * c[2], 3.0 * c[3], s, count);
+  s[count++] = 1.0;
+  double fs[4];
+  for (int i = 0; i < count; ++i) fs[i] = cubic(c, s[i]);
+
+  const auto meets = [&](double t) -> std::optional<Crossing> {
+    const Vec3 p = start[0] + t * (end[0] - start[0]);
+    const Vec3 a = start[1] + t * (end[1] - start[1]);
+    const Vec3 bb = start[2] + t * (end[2] - start[2]);
+    const Vec3 cc = start[3] + t * (end[3] - start[3]);
+    const ClosestPoint cp = closestPointOnTriangle(p, a, bb, cc);
+    double reach2 = maxEdge2(a, bb, cc);
+    if (!(reach2 > 0.0)) reach2 = scale * scale;
+    if (cp.distance2 > kCrossingTolerance * kCrossingTolerance * reach2) return std::nullopt;
+    return Crossing{t, cp.weights};
+  };
+  for (int i = 0; i + 1 < count; ++i) {
+    // A start in the plane (i = 0) has no side to leave: not a crossing.
+    if (std::abs(fs[i]) <= tol) {
+      if (i > 0)
+        if (auto hit = meets(s[i])) return hit;
+      continue;
+    }
+    if (std::abs(fs[i + 1]) <= tol || (fs[i] > 0.0) == (fs[i + 1] > 0.0)) continue;
+    if (auto hit = meets(rootInPiece(c, s[i], s[i + 1], fs[i], fs[i + 1]))) return hit;
+  }
+  if (std::abs(fs[count - 1]) <= tol) return meets(1.0);
+  return std::nullopt;
+}
+
+}  // namespace psc::bullet

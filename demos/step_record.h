@@ -1,0 +1,65 @@
+// What one simulation step of a benchmark run measured: one record per step, filled where each
+// figure happens (the runner around Bullet's step and in its collision hooks; SensorPipeline from
+// the plugin's Stats). Times are kept apart from counts; the run's summary (RunResult) is computed
+// from the records alone.
+#pragma once
+
+#include <cstddef>
+#include <string>
+
+namespace psc::demo {
+
+/// Wall-clock times of one step, milliseconds.
+struct StepTimes {
+  double step = 0.0;             ///< stepSimulation minus `hooks`
+  double hooks = 0.0;            ///< the measurement done inside the step (contacts, truth): not the pipeline's
+  double truth = 0.0;            ///< of `hooks`: the ground truth
+  double detect = 0.0;           ///< whole performDiscreteCollisionDetection (a cross-check)
+  /// Bullet's face-tree refit, split out of btSoftBody::predictMotion (TimedSoftBodySolver). The
+  /// tree exists only for VF_SS: normally 0 for our pipelines.
+  double face_refit = 0.0;
+  /// The BT_PROFILE zone "Deformable Collision": Bullet's node-tree vs face-tree traversal and
+  /// every CollideVF_SS test. For our pipelines only the pairs the plugin handed back to Bullet.
+  double traversal_exact = 0.0;
+  // Our pipelines, from psc::bullet::Stats (0 for Bullet's).
+  double sensor_step = 0.0;      ///< Stats::ms_sensor_step: body sync + SensorWorld::step()
+  double exact = 0.0;            ///< Stats::ms_exact: the exact stage on the candidates
+  double particle = 0.0;         ///< StepStats::ms_sensors: particle movement
+  double refit = 0.0;            ///< StepStats::ms_refit: body / region / chunk box refit
+  double flagging = 0.0;         ///< StepStats::ms_flagging: body / region pairing, sensor decisions
+  double candidates = 0.0;       ///< StepStats::ms_candidates
+  double repartition = 0.0;      ///< StepStats::ms_repartition
+  double core_total = 0.0;       ///< StepStats::ms_total: the whole SensorWorld::step()
+
+  /// Soft-soft collision time of the step, one definition for every pipeline (see runner.h).
+  double collision() const { return face_refit + traversal_exact + sensor_step + exact; }
+};
+
+/// Counts of one step.
+struct StepCounts {
+  std::size_t contacts_found = 0;  ///< distinct soft-soft (node, face) contacts Bullet's solver sees
+  std::size_t exact_tests = 0;     ///< CollideVF_SS tests (Bullet: counted by the probe; ours: the plugin's)
+  // Our pipelines, from psc::bullet::Stats.
+  bool sensed = false;             ///< the plugin ran its sensor step this step
+  std::size_t particles = 0, flagged_pairs = 0, candidate_pairs = 0, round_cap_hits = 0, repartitions = 0;
+  std::size_t fallback_pairs = 0;  ///< soft-soft pairs the plugin handed back to Bullet's algorithm
+  long rounds = 0;
+  // Against the ground truth of this step's collision pass (all 0 without truth).
+  std::size_t truth_strict = 0, truth_full = 0;          ///< truth contacts inside each radius
+  std::size_t found_in_strict = 0, found_in_full = 0;    ///< found contacts inside each radius
+  std::size_t outside_truth = 0;                         ///< found contacts outside the full truth
+  std::size_t truth_pairs = 0, truth_pairs_found = 0;    ///< body pairs in contact, of them with a contact found
+  std::size_t truth_ambiguous = 0;                       ///< truth contacts in the rounding band
+  std::size_t truth_strict_untestable = 0;               ///< strict truth on triangles CollideVF_SS refuses
+  // After the step.
+  std::size_t penetrating_vertices = 0;                  ///< inside another closed body beyond the margins
+};
+
+struct StepRecord {
+  StepTimes ms;
+  StepCounts n;
+  double max_penetration = 0.0;  ///< length units, deepest of the penetrating vertices
+  std::string error;             ///< the plugin's error or skip reason this step, if any
+};
+
+}  // namespace psc::demo

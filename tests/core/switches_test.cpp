@@ -1,0 +1,308 @@
+// Settings that switch a stage off change what they should and nothing else (build_candidates,
+// one_ring, no_backtrack), and the midphase's memory stays flat over a long deforming run.
+#include "psc/mesh.h"
+#include "psc/shapes.h"
+#include "psc/world.h"
+
+#include "core/reference.h"
+#include "core/test_util.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <functional>
+#include <initializer_list>
+#include <cmath>
+#include <set>
+#include <vector>
+
+namespace psc {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+double meanEdge(const TriMesh& m) {
+  const MeshTopology t(m.triangles, m.vertices.size());
+  return edgeStats(t, PositionView::of(m.vertices)).mean;
+}
+
+/// What one step produced, copied out of the world.
+struct StepRecord {
+  std::vector<FlaggedPair> flagged;
+  std::vector<CandidatePair> candidates;
+  std::vector<Index> particle_vertices;
+  int rounds = 0;
+  std::size_t round_cap_hits = 0;
+  std::size_t truth = 0, found = 0;  ///< brute-force contacts within the margins; of those among the candidates
+};
+
+/// Registers the meshes (views into them: keep them alive and in place) with one margin.
+void addAll(SensorWorld& world, std::initializer_list<TriMesh*> meshes, double margin) {
+  for (TriMesh* m : meshes) {
+    BodyDesc d;
+    d.triangles = m->triangles;
+    d.positions = PositionView::of(m->vertices);
+    d.margin = margin;
+    world.addBody(d);
+  }
+}
+
+/// Runs `steps` steps, calling `before_step` ahead of each, and records what each produced.
+/// With `a`, `b` (the two bodies' meshes, ids 0 and 1) and `radius`, also counts the brute-force
+/// contacts within `radius` and those among the candidates.
+std::vector<StepRecord> record(SensorWorld& world, int steps, const std::function<void()>& before_step = {},
+                               const TriMesh* a = nullptr, const TriMesh* b = nullptr, double radius = 0.0) {
+  std::vector<StepRecord> out;
+  for (int s = 0; s < steps; ++s) {
+    if (before_step) before_step();
+    const StepResult& r = world.step();
+    StepRecord rec{r.flagged, r.candidates, {}, r.stats.rounds, r.stats.round_cap_hits};
+    for (const ParticleState& p : world.particles()) rec.particle_vertices.push_back(p.vertex);
+    std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
+    for (const CandidatePair& c : r.candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+    const TriMesh* meshes[2] = {a, b};
+    if (a != nullptr && b != nullptr)
+      for (BodyId i = 0; i < 2; ++i)
+        for (const auto& [v, t] : test::bruteContacts(*meshes[i], *meshes[1 - i], radius)) {
+          ++rec.truth;
+          rec.found += cand.count(std::make_tuple(i, v, BodyId{1 - i}, t));
+        }
+    out.push_back(std::move(rec));
+  }
+  return out;
+}
+
+/// A sphere and a torus closing in on each other over `steps` steps (the torus moves 0.01 a step).
+std::vector<StepRecord> approach(const SensorSettings& settings, int steps) {
+  TriMesh a = makeSphere(1.0, 800), b = makeTorus(0.8, 0.3, 800);
+  b.rotate(Vec3(1, 0, 0), kPi / 2).translate(Vec3(1.95, 0.1, 0));
+  SensorWorld world(settings);
+  addAll(world, {&a, &b}, 0.5 * meanEdge(a));
+  return record(
+      world, steps, [&] { for (Vec3& p : b.vertices) p.x() -= 0.01; }, &a, &b, 2.0 * 0.5 * meanEdge(a));
+}
+
+void expectSameFlagsAndParticles(const std::vector<StepRecord>& x, const std::vector<StepRecord>& y) {
+  ASSERT_EQ(x.size(), y.size());
+  for (std::size_t s = 0; s < x.size(); ++s) {
+    EXPECT_TRUE(x[s].flagged == y[s].flagged) << "step " << s;
+    EXPECT_EQ(x[s].particle_vertices, y[s].particle_vertices) << "step " << s;
+    EXPECT_EQ(x[s].rounds, y[s].rounds) << "step " << s;
+  }
+}
+
+TEST(Switches, BuildCandidatesOffDropsTheCandidatesOnly) {
+  for (Flagging mode : {Flagging::SensorsAndBounds, Flagging::Sensors}) {
+    SCOPED_TRACE(mode == Flagging::Sensors ? "Flagging::Sensors" : "Flagging::SensorsAndBounds");
+    SensorSettings on;
+    on.flagging = mode;
+    SensorSettings off = on;
+    off.build_candidates = false;
+    const std::vector<StepRecord> with = approach(on, 8), without = approach(off, 8);
+    expectSameFlagsAndParticles(with, without);
+    std::size_t flagged = 0, candidates = 0;
+    for (std::size_t s = 0; s < with.size(); ++s) {
+      EXPECT_TRUE(without[s].candidates.empty()) << "step " << s;
+      flagged += without[s].flagged.size();
+      candidates += with[s].candidates.size();
+    }
+    EXPECT_GT(flagged, 0u) << "the bodies must be flagged, or nothing was switched off";
+    EXPECT_GT(candidates, 0u);
+  }
+}
+
+TEST(Switches, OneRingOffShrinksTheThesisCandidateSetsToTheRegions) {
+  SensorSettings on;
+  on.flagging = Flagging::Sensors;  // the mode whose candidates are the flagged regions' sets
+  SensorSettings off = on;
+  off.one_ring = false;
+  const std::vector<StepRecord> with = approach(on, 8), without = approach(off, 8);
+  expectSameFlagsAndParticles(with, without);
+  std::size_t fewer = 0;
+  for (std::size_t s = 0; s < with.size(); ++s) {
+    const std::set<std::tuple<BodyId, Index, BodyId, Index>> ringed = [&] {
+      std::set<std::tuple<BodyId, Index, BodyId, Index>> set;
+      for (const CandidatePair& c : with[s].candidates) set.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+      return set;
+    }();
+    for (const CandidatePair& c : without[s].candidates)
+      EXPECT_EQ(ringed.count({c.vertex_body, c.vertex, c.triangle_body, c.triangle}), 1u)
+          << "step " << s << ": a candidate without the ring must be one with it";
+    EXPECT_LE(without[s].candidates.size(), with[s].candidates.size());
+    fewer += with[s].candidates.size() - std::min(with[s].candidates.size(), without[s].candidates.size());
+  }
+  EXPECT_GT(fewer, 0u) << "the ring must have added candidates somewhere";
+}
+
+TEST(Switches, OneRingOffGivesCandidateSetsOfTheRegionsAlone) {
+  for (Flagging mode : {Flagging::SensorsAndBounds, Flagging::Sensors}) {
+    SCOPED_TRACE(mode == Flagging::Sensors ? "Flagging::Sensors" : "Flagging::SensorsAndBounds");
+    TriMesh a = makeSphere(1.0, 800), b = makeSphere(1.0, 800);
+    b.translate(Vec3(2.0 + 0.3 * meanEdge(a), 0, 0));
+    std::size_t ring_vertices = 0, ring_triangles = 0, checked = 0;
+    SensorSettings with_ring;
+    with_ring.flagging = mode;
+    SensorSettings without_ring = with_ring;
+    without_ring.one_ring = false;
+    SensorWorld w1(with_ring), w0(without_ring);
+    for (SensorWorld* w : {&w1, &w0})
+      for (TriMesh* m : {&a, &b}) {
+        BodyDesc d;
+        d.triangles = m->triangles;
+        d.positions = PositionView::of(m->vertices);
+        d.margin = 0.4 * meanEdge(a);
+        d.particles = 8;  // regions with borders, so that there is a ring to drop
+        w->addBody(d);
+      }
+    for (int k = 0; k < 2; ++k) {  // the particles need a step or two to meet
+      w1.step();
+      w0.step();
+    }
+    const StepResult& r1 = w1.step();
+    const StepResult& r0 = w0.step();
+    ASSERT_TRUE(r1.flagged == r0.flagged);
+    ASSERT_FALSE(r0.flagged.empty());
+    for (const FlaggedPair& f : r0.flagged)
+      for (BodyId vb : {f.body_a, f.body_b}) {
+        const CandidateSet bare = w0.candidateSet(f, vb), ringed = w1.candidateSet(f, vb);
+        const Index vregion = vb == f.body_a ? f.region_a : f.region_b;
+        const Index tregion = vb == f.body_a ? f.region_b : f.region_a;
+        const Partition& vp = w0.partition(bare.vertex_body);
+        const Partition& tp = w0.partition(bare.triangle_body);
+        const MeshTopology& tt = w0.topology(bare.triangle_body);
+        for (Index v : bare.vertices) EXPECT_EQ(vp.region_of[v], vregion) << "vertex " << v;
+        for (Index t : bare.triangles) {
+          const Triangle& tri = tt.triangle(t);
+          EXPECT_TRUE(tp.region_of[tri[0]] == tregion || tp.region_of[tri[1]] == tregion ||
+                      tp.region_of[tri[2]] == tregion)
+              << "triangle " << t;
+        }
+        EXPECT_TRUE(std::includes(ringed.vertices.begin(), ringed.vertices.end(), bare.vertices.begin(),
+                                  bare.vertices.end()));
+        EXPECT_TRUE(std::includes(ringed.triangles.begin(), ringed.triangles.end(), bare.triangles.begin(),
+                                  bare.triangles.end()));
+        ring_vertices += ringed.vertices.size() - bare.vertices.size();
+        ring_triangles += ringed.triangles.size() - bare.triangles.size();
+        ++checked;
+      }
+    EXPECT_GT(checked, 0u);
+    EXPECT_GT(ring_vertices, 0u);
+    EXPECT_GT(ring_triangles, 0u);
+  }
+}
+
+/// Two interlocking U shapes (test::interlockedUShapes, as in world_test's Chapter4 case):
+/// particles of the two bodies approach each other head-on along the crossing tubes.
+std::vector<StepRecord> interlockedUs(const SensorSettings& settings) {
+  const double e = meanEdge(makeUShape(1.0, 1.0, 0.2, 1200));
+  std::array<TriMesh, 2> us = test::interlockedUShapes(0.3 * e);
+  SensorWorld world(settings);
+  addAll(world, {&us[0], &us[1]}, 0.6 * e);
+  return record(world, 4);
+}
+
+TEST(Switches, NoBacktrackOffLetsHeadOnParticlesSwapUntilTheRoundCap) {
+  SensorSettings on;
+  SensorSettings off = on;
+  off.no_backtrack = false;
+  // Pure Jacobi (thesis §3.4): two particles passing each other swap back every round, so every
+  // step ends at max_rounds. With the guard they settle (measured 9 rounds, then 1 a step).
+  const std::vector<StepRecord> guarded = interlockedUs(on), jacobi = interlockedUs(off);
+  for (std::size_t s = 0; s < guarded.size(); ++s) {
+    EXPECT_EQ(guarded[s].round_cap_hits, 0u) << "step " << s;
+    EXPECT_LT(guarded[s].rounds, on.max_rounds) << "step " << s;
+    EXPECT_EQ(jacobi[s].round_cap_hits, 1u) << "step " << s;
+    EXPECT_EQ(jacobi[s].rounds, off.max_rounds) << "step " << s;
+  }
+}
+
+TEST(Switches, NoBacktrackOffChangesOnlyTheParticlePaths) {
+  SensorSettings on;
+  SensorSettings off = on;
+  off.no_backtrack = false;
+  {
+    // Three equal spheres in a row (chapter-4 case 2): the particles walk towards their
+    // neighbours and never try to step back, so both settings give the same steps bit for bit.
+    const auto row = [](const SensorSettings& settings) {
+      TriMesh a = makeSphere(1.0, 600), b = makeSphere(1.0, 600), c = makeSphere(1.0, 600);
+      const double gap = 0.3 * meanEdge(a);
+      b.translate(Vec3(2.0 + gap, 0, 0));
+      c.translate(Vec3(4.0 + 2 * gap, 0, 0));
+      SensorWorld world(settings);
+      addAll(world, {&a, &b, &c}, 0.4 * meanEdge(a));
+      return record(world, 3);
+    };
+    const std::vector<StepRecord> with = row(on), without = row(off);
+    expectSameFlagsAndParticles(with, without);
+    EXPECT_GT(with[0].rounds, 1) << "the particles must have moved, or the guard had nothing to change";
+    for (std::size_t s = 0; s < with.size(); ++s) EXPECT_TRUE(with[s].candidates == without[s].candidates);
+  }
+  {
+    // A torus closing in on a sphere: here the guard does redirect a particle. The particles'
+    // paths, and with them the sensor axes and the candidates, may differ; every contact within
+    // the margins stays among the candidates either way.
+    const std::vector<StepRecord> with = approach(on, 8), without = approach(off, 8);
+    std::size_t different_paths = 0, truth = 0;
+    for (std::size_t s = 0; s < with.size(); ++s) {
+      EXPECT_EQ(with[s].found, with[s].truth) << "step " << s;
+      EXPECT_EQ(without[s].found, without[s].truth) << "step " << s;
+      truth += with[s].truth;
+      EXPECT_EQ(without[s].round_cap_hits, 0u) << "step " << s;
+      if (with[s].rounds != without[s].rounds) ++different_paths;
+    }
+    EXPECT_GT(different_paths, 0u) << "the guard must have fired in this scene";
+    EXPECT_GT(truth, 0u) << "the bodies must touch";
+  }
+}
+
+TEST(Memory, MidphaseBytesStayFlatOverALongDeformingRun) {
+  // 300 steps in cycles of 60: the sphere stretches to 1.9× along x and back (which repartitions
+  // it), and a small third body comes at step 30 of each cycle and goes at step 50 (which changes
+  // the budget and repartitions both). Every cycle repeats the first, so the bytes the midphase
+  // keeps for the two bodies must never exceed the first cycle's largest figure: anything that
+  // accumulates (lists appended to on repartition, buffers that only grow) breaks this.
+  SensorWorld w;
+  TriMesh a = makeSphere(1.0, 2000), b = makeTorus(0.8, 0.3, 2000), c = makeSphere(0.3, 300);
+  b.translate(Vec3(1.9, 0, 0));
+  c.translate(Vec3(0, 1.35, 0));
+  const TriMesh rest = a;
+  std::vector<BodyId> ids;
+  for (TriMesh* m : {&a, &b}) {
+    BodyDesc d;
+    d.triangles = m->triangles;
+    d.positions = PositionView::of(m->vertices);
+    d.margin = 0.02;
+    ids.push_back(w.addBody(d));
+  }
+  BodyId visitor = kInvalidBody;
+  std::size_t first_cycle = 0, later = 0;
+  for (int k = 0; k < 300; ++k) {
+    const int phase = k % 60;
+    const double f = 1.0 + 0.9 * std::sin(kPi * phase / 60.0);
+    for (std::size_t i = 0; i < a.vertices.size(); ++i) {
+      const Vec3& p = rest.vertices[i];
+      a.vertices[i] = Vec3(p.x() * f, p.y() / std::sqrt(f), p.z());
+    }
+    if (phase == 30) {
+      BodyDesc d;
+      d.triangles = c.triangles;
+      d.positions = PositionView::of(c.vertices);
+      d.margin = 0.02;
+      visitor = w.addBody(d);
+    }
+    if (phase == 50) w.removeBody(visitor);
+    w.step();
+    const std::size_t bytes = w.memoryBytes(ids[0]) + w.memoryBytes(ids[1]);
+    std::size_t& max = k < 60 ? first_cycle : later;
+    max = std::max(max, bytes);
+  }
+  // The run exercised what could make memory grow: measured 11 repartitions of the sphere.
+  EXPECT_GE(w.repartitionCount(ids[0]), 9u);
+  EXPECT_GE(w.repartitionCount(ids[1]), 4u);
+  EXPECT_GT(first_cycle, 0u);
+  EXPECT_LE(later, first_cycle);
+}
+
+}  // namespace
+}  // namespace psc
