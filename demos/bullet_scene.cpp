@@ -97,6 +97,14 @@ btSoftBody* createSoftBody(btSoftBodyWorldInfo& info, const SoftBodySpec& spec, 
   psb->m_cfg.piterations = position_iterations;
   psb->m_cfg.collisions = collision_flags;
   psb->setTotalMass(static_cast<btScalar>(spec.mass), true);
+  for (Index v : spec.pinned) {
+    if (v >= mesh.vertices.size()) {
+      delete psb;
+      throw Error(ErrorCode::InvalidArgument, "soft body '" + spec.name + "': pinned vertex " + std::to_string(v) +
+                                                  " is not below its " + std::to_string(mesh.vertices.size()) + " vertices");
+    }
+    psb->setMass(static_cast<int>(v), 0);  // Bullet keeps nodes of zero mass where they are
+  }
   if (spec.volume_conservation > 0) psb->setPose(true, false);  // rest volume only, no frame matching
   psb->getCollisionShape()->setMargin(static_cast<btScalar>(spec.margin));
   psb->setVelocity(bt(spec.velocity));

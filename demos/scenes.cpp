@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <numeric>
 
@@ -289,6 +290,47 @@ Scene fastImpact(const SceneParams& p) {
   return s;
 }
 
+Scene projectile(const SceneParams& p) {
+  // A 0.25-radius sphere at 30 units/s moves 0.5 units per step at 60 Hz, its own diameter: a node
+  // can pass the block's face between two steps without ever being within a margin of it.
+  Scene s;
+  s.title = "a small soft sphere at 30 units/s into a large soft block (one diameter per step)";
+  s.bodies.push_back(ball("block", makeBox({0.5, 1.5, 1.5}, p.resolution), 6.0));
+  s.bodies.push_back(ball("projectile", makeSphere(0.25, p.resolution).translate({-3.0, 0.1, -0.05}), 0.2));
+  s.bodies[1].velocity = {30, 0, 0};
+  return s;
+}
+
+/// The vertices of a patch at the four corners of its bounding box in x and z.
+std::vector<Index> cornersOf(const TriMesh& m) {
+  const Box b = boundsOf(m);
+  std::vector<Index> corners;
+  for (const double x : {b.lo.x(), b.hi.x()})
+    for (const double z : {b.lo.z(), b.hi.z()}) {
+      Index best = 0;
+      double best_d = std::numeric_limits<double>::infinity();
+      for (std::size_t v = 0; v < m.vertices.size(); ++v) {
+        const double d = std::hypot(m.vertices[v].x() - x, m.vertices[v].z() - z);
+        if (d < best_d) best_d = d, best = static_cast<Index>(v);
+      }
+      corners.push_back(best);
+    }
+  return corners;
+}
+
+Scene fastCloth(const SceneParams& p) {
+  // 20 units/s at 60 Hz: the ball moves 0.33 units per step through a cloth of thickness 0 (only
+  // the margins), so a node can cross the cloth between two steps.
+  Scene s;
+  s.title = "a soft ball at 20 units/s into a cloth pinned at its corners";
+  s.gravity = {0, -kGravity, 0};
+  s.bodies.push_back(cloth("cloth", flatPatch(3.0, p.resolution)));
+  s.bodies[0].pinned = cornersOf(s.bodies[0].mesh);
+  s.bodies.push_back(ball("ball", makeSphere(0.5, p.resolution).translate({0.05, 2.0, -0.1}), 1.0));
+  s.bodies[1].velocity = {0, -20, 0};
+  return s;
+}
+
 Scene meshDrop(const SceneParams& p, std::size_t k) {
   Scene s;
   std::string path = p.mesh_file;
@@ -350,6 +392,8 @@ const std::vector<SceneInfo>& sceneCatalog() {
       {"cloth_ball", "6", "a cloth patch falling onto a soft ball (open surface)", false, 2, 120},
       {"fast_impact", "7", "a fast impact: 0.5 units per step, more than a region", false, 2, 60},
       {"mesh", "8", "a mesh file (--mesh) as soft bodies dropped onto copies of itself", true, 3, 150},
+      {"projectile", "9", "a small soft sphere at 30 units/s into a large soft block (tunnelling)", false, 2, 60},
+      {"fast_cloth", "10", "a soft ball at 20 units/s into a pinned cloth (tunnelling)", false, 2, 60},
   };
   return catalog;
 }
@@ -379,6 +423,8 @@ Scene makeScene(const std::string& key, const SceneParams& p) {
   else if (n == "mixed_pile") s = mixedPile(p, bodyCount(p, *info));
   else if (n == "cloth_ball") s = clothBall(p);
   else if (n == "fast_impact") s = fastImpact(p);
+  else if (n == "projectile") s = projectile(p);
+  else if (n == "fast_cloth") s = fastCloth(p);
   else s = meshDrop(p, bodyCount(p, *info));
   s.name = n;
   s.default_steps = info->default_steps;

@@ -40,6 +40,7 @@ struct SoftBodySpec {
   double friction = 0.5;         ///< Bullet's kDF in [0, 1]
   double damping = 0.01;         ///< Bullet's kDP in [0, 1]
   bool closed = false;           ///< every edge shared by exactly two triangles (set by the builder)
+  std::vector<Index> pinned;     ///< vertices held in place (Bullet node mass 0), e.g. cloth corners
 };
 
 /// A static rigid box (ground, container walls): identical in both pipelines.

@@ -62,9 +62,10 @@ Vec3 load(const char* base, std::size_t stride, Index v) {
 // index order, i.e. through the positions' memory in order, reading the view's raw scalars (no
 // per-call type switch), and grows the box of the vertex's own chunk and of each chunk whose
 // triangles it is in. `sum` keeps a NaN that min/max would drop silently.
+// With `swept`, a vertex's previous position goes into the same boxes instead of a motion term.
 template <typename T>
 void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev, std::size_t prev_stride,
-                 std::vector<MotionBox>& boxes, double& sum) {
+                 bool swept, std::vector<MotionBox>& boxes, double& sum) {
   const std::size_t n = ch.chunk_of.size();
   for (std::size_t v = 0; v < n; ++v) {
     // Positions usually live inside larger records (Bullet's nodes are 256 bytes): fetch ahead.
@@ -78,17 +79,26 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
     MotionBox& box = boxes[c];
     box.lo = box.lo.cwiseMin(Vec3(x, y, z));
     box.hi = box.hi.cwiseMax(Vec3(x, y, z));
+    Vec3 q_lo(x, y, z), q_hi(x, y, z);
     if (prev != nullptr) {
       const T* q = reinterpret_cast<const T*>(prev + v * prev_stride);
-      const double dx = x - double(q[0]), dy = y - double(q[1]), dz = z - double(q[2]);
-      const double m2 = dx * dx + dy * dy + dz * dz;
-      sum += m2;
-      box.motion = m2 > box.motion ? m2 : box.motion;  // squared until the end of the pass
+      const Vec3 qv{static_cast<double>(q[0]), static_cast<double>(q[1]), static_cast<double>(q[2])};
+      if (swept) {
+        sum += qv.sum();
+        q_lo = q_lo.cwiseMin(qv);
+        q_hi = q_hi.cwiseMax(qv);
+        box.lo = box.lo.cwiseMin(qv);
+        box.hi = box.hi.cwiseMax(qv);
+      } else {
+        const double m2 = (Vec3(x, y, z) - qv).squaredNorm();
+        sum += m2;
+        box.motion = m2 > box.motion ? m2 : box.motion;  // squared until the end of the pass
+      }
     }
     for (Index f : ch.foreign_of.row(static_cast<Index>(v))) {
       MotionBox& fb = boxes[f];
-      fb.lo = fb.lo.cwiseMin(Vec3(x, y, z));
-      fb.hi = fb.hi.cwiseMax(Vec3(x, y, z));
+      fb.lo = fb.lo.cwiseMin(q_lo);
+      fb.hi = fb.hi.cwiseMax(q_hi);
     }
   }
 }
@@ -108,7 +118,7 @@ void measureChunk(const MeshTopology& topo, const char* base, std::size_t stride
 
 }  // namespace
 
-void refitBounds(Body& b, bool measure) {
+void refitBounds(Body& b, bool measure, bool swept) {
   const ChunkLists& ch = b.chunks;
   b.chunk_box.assign(ch.count(), emptyBox());
   b.region_box.assign(b.regionCount(), emptyBox());
@@ -126,19 +136,33 @@ void refitBounds(Body& b, bool measure) {
   const bool is_float = b.positions.scalar() == PositionView::Scalar::Float32;
   double sum = 0.0;
   if (is_float)
-    streamBoxes<float>(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
+    streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum);
   else
-    streamBoxes<double>(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
+    streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum);
   bool finite = std::isfinite(sum);
   for (MotionBox& box : b.chunk_box) {
     box.motion = std::sqrt(box.motion);
     // Finite but beyond kMaxCoordinate (a blown-up simulation) is rejected like NaN.
     finite = finite && box.lo.cwiseAbs().maxCoeff() <= kMaxCoordinate && box.hi.cwiseAbs().maxCoeff() <= kMaxCoordinate;
   }
-  if (!same_type)
+  if (!same_type && swept) {
+    for (std::size_t v = 0; v < ch.chunk_of.size(); ++v) {
+      if (ch.chunk_of[v] == kInvalidIndex) continue;
+      const Vec3 q = b.previous[static_cast<Index>(v)];
+      sum += q.sum();
+      const auto add = [&](Index c) {
+        b.chunk_box[c].lo = b.chunk_box[c].lo.cwiseMin(q);
+        b.chunk_box[c].hi = b.chunk_box[c].hi.cwiseMax(q);
+      };
+      add(ch.chunk_of[v]);
+      for (Index f : ch.foreign_of.row(static_cast<Index>(v))) add(f);
+    }
+    finite = finite && std::isfinite(sum);
+  } else if (!same_type) {
     for (std::size_t c = 0; c < ch.count(); ++c)
       for (Index v : ch.vertices.row(static_cast<Index>(c)))
         b.chunk_box[c].motion = std::max(b.chunk_box[c].motion, b.vertexMotion(v));
+  }
   if (!finite) {
     checkFinite(b.positions, b.label());
     if (!b.previous.empty()) checkFinite(b.previous, b.label() + " (previous positions)");
@@ -242,6 +266,7 @@ struct PairContext {
   const Body& tb;
   double margin_sum;
   double motion_factor;
+  bool swept;
   const Axis& axis;
   std::vector<std::uint64_t>& out;
   StepStats& counters;
@@ -251,10 +276,17 @@ struct PairContext {
 void gatherVertices(const PairContext& ctx, ChunkRef& c) {
   if (c.vertices_at >= 0) return;
   c.vertices_at = static_cast<int>(ctx.s.verts.size());
+  const bool swept = ctx.swept && !ctx.vb.previous.empty();
   for (Index v : ctx.vb.chunks.vertices.row(c.chunk)) {
-    const Vec3 x = ctx.vb.positions[v];
-    ctx.s.verts.push_back(
-        {x, ctx.margin_sum + ctx.motion_factor * ctx.vb.vertexMotion(v), ctx.axis.valid ? ctx.axis.project(x) : 0.0, v});
+    Vec3 x = ctx.vb.positions[v];
+    double r = ctx.margin_sum + ctx.motion_factor * ctx.vb.vertexMotion(v);
+    if (swept) {
+      // The ball about the path's midpoint with half its length holds the whole path.
+      const Vec3 q = ctx.vb.previous[v];
+      r = ctx.margin_sum + 0.5 * (x - q).norm();
+      x = 0.5 * (x + q);
+    }
+    ctx.s.verts.push_back({x, r, ctx.axis.valid ? ctx.axis.project(x) : 0.0, v});
   }
   ctx.counters.candidate_vertices += ctx.vb.chunks.vertices.row(c.chunk).size();
 }
@@ -263,6 +295,7 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   if (c.triangles_at >= 0) return;
   c.triangles_at = static_cast<int>(ctx.s.tris.size());
   const MeshTopology& topo = *ctx.tb.topology;
+  const bool swept = ctx.swept && !ctx.tb.previous.empty();
   for (Index t : ctx.tb.chunks.triangles.row(c.chunk)) {
     const Triangle& tri = topo.triangle(t);
     const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], cc = ctx.tb.positions[tri[2]];
@@ -271,6 +304,18 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
       const double pa = ctx.axis.project(a), pb = ctx.axis.project(b), pc = ctx.axis.project(cc);
       rec.nlo = std::min({pa, pb, pc});
       rec.nhi = std::max({pa, pb, pc});
+    }
+    if (swept) {  // the triangle's swept volume lies in the box of its six positions
+      for (Index k : tri) {
+        const Vec3 q = ctx.tb.previous[k];
+        rec.lo = rec.lo.cwiseMin(q);
+        rec.hi = rec.hi.cwiseMax(q);
+        if (ctx.axis.valid) {
+          const double pq = ctx.axis.project(q);
+          rec.nlo = std::min(rec.nlo, pq);
+          rec.nhi = std::max(rec.nhi, pq);
+        }
+      }
     }
     ctx.s.tris.push_back(rec);
   }
@@ -407,8 +452,8 @@ class Collector {
     flagged_.push_back(f);
 
     const auto t0 = std::chrono::steady_clock::now();
-    const PairContext to_b{A, B, A.margin + B.margin, mf, axis, ab_keys, counters_, s_};
-    const PairContext to_a{B, A, A.margin + B.margin, mf, axis, ba_keys, counters_, s_};
+    const PairContext to_b{A, B, A.margin + B.margin, mf, params_.swept, axis, ab_keys, counters_, s_};
+    const PairContext to_a{B, A, A.margin + B.margin, mf, params_.swept, axis, ba_keys, counters_, s_};
     const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
     s_.items_a.clear();
     s_.items_b.clear();

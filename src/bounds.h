@@ -22,11 +22,13 @@ namespace psc::detail {
 
 /// Refits b's chunk, region and body boxes; throws psc::Error naming the first non-finite vertex.
 /// With `measure`, also fills b.shape (region areas and the longest edge) in the same pass.
-void refitBounds(Body& b, bool measure);
+/// `swept` (MotionBound::Swept): the boxes hold the previous positions too and no motion term.
+void refitBounds(Body& b, bool measure, bool swept);
 
 struct CullParams {
-  double motion_factor = 2.0;
-  bool use_sensors = true;  ///< false: Flagging::Bounds (the ablation)
+  double motion_factor = 2.0;  ///< MotionBound::Radius; 0 with `swept`
+  bool swept = false;          ///< MotionBound::Swept
+  bool use_sensors = true;     ///< false: Flagging::Bounds (the ablation)
 };
 
 /// Flags the region pairs of different bodies that reach the candidate stage and appends the

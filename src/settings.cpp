@@ -22,6 +22,11 @@ void validate(const SensorSettings& s) {
   if (s.max_rounds < 1) bad("max_rounds", s.max_rounds, "must be at least 1");
   if (!std::isfinite(s.motion_factor) || s.motion_factor < 0.0)
     bad("motion_factor", s.motion_factor, "must be finite and not negative");
+  if (s.motion_bound != MotionBound::Radius && s.motion_bound != MotionBound::Swept)
+    bad("motion_bound", static_cast<double>(s.motion_bound), "must be MotionBound::Radius or MotionBound::Swept");
+  if (s.motion_bound == MotionBound::Swept && s.flagging == Flagging::Sensors)
+    throw Error(ErrorCode::InvalidSettings,
+                "motion_bound = Swept is not supported with flagging = Sensors (the thesis's flag-only mode)");
   if (s.min_region_vertices < 1)
     bad("min_region_vertices", static_cast<double>(s.min_region_vertices), "must be at least 1");
   if (s.chunk_vertices < 4) bad("chunk_vertices", static_cast<double>(s.chunk_vertices), "must be at least 4");

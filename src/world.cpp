@@ -86,7 +86,7 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
   b.chunks = detail::buildChunks(*b.topology, b.positions, b.partition.region_of, b.partition.regionCount(),
                                  settings.chunk_vertices);
   // The repartition check compares with what the same refit measures now (A* and the longest edge).
-  detail::refitBounds(b, true);
+  detail::refitBounds(b, true, settings.motion_bound == MotionBound::Swept);
   b.max_edge = b.shape.max_edge;
   const std::vector<double> areas =
       settings.repartition.estimator == AreaEstimator::TrueArea
@@ -134,7 +134,7 @@ void SensorWorld::Impl::refitAndCheck(Body& b, StepStats& stats) {
   const bool check = rs.enabled && b.deformable && ++b.steps_since_check >= rs.check_every;
   // The check's area and edge figures come out of the refit's pass over the vertices.
   auto t = Clock::now();
-  detail::refitBounds(b, check);
+  detail::refitBounds(b, check, settings.motion_bound == MotionBound::Swept);
   stats.ms_refit += msSince(t);
   if (!check) return;
   t = Clock::now();
@@ -390,7 +390,8 @@ const StepResult& SensorWorld::step() {
     std::vector<Body*> ordered;
     for (auto& kv : w.bodies) ordered.push_back(kv.second.get());
     detail::CullParams params;
-    params.motion_factor = w.settings.motion_factor;
+    params.swept = w.settings.motion_bound == MotionBound::Swept;
+    params.motion_factor = params.swept ? 0.0 : w.settings.motion_factor;
     params.use_sensors = w.settings.flagging == Flagging::SensorsAndBounds;
     detail::cullAndCollect(ordered, params, res.flagged, res.candidates, st);
     std::sort(res.flagged.begin(), res.flagged.end(), detail::flaggedLess);

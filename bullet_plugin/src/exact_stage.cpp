@@ -130,15 +130,16 @@ Vec3 normalWithoutDistance(const btSoftBody::Node& node, const btSoftBody::Face&
   return e.cross(Vec3::Unit(axis)).normalized();
 }
 
-/// Bullet's CollideVF_SS decision and contact (Robust = false), or Robust's (true).
+/// Bullet's CollideVF_SS decision and contact (Robust = false), or Robust's (true). Without
+/// `motion_term` the radius is the margins alone (Continuous), not margins + 2·|m_x − m_q|.
 ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::Node& node,
-                         const btSoftBody::Face& face, btSoftBody::SContact& contact) {
+                         const btSoftBody::Face& face, btSoftBody::SContact& contact, bool motion_term = true) {
   const btVector3 o = node.m_x;
   btVector3 p(0, 0, 0);  // read only when d was set, i.e. together with p
   btScalar d = SIMD_INFINITY;
   bool skipped = false;
   bulletProjectOrigin(face.m_n[0]->m_x - o, face.m_n[1]->m_x - o, face.m_n[2]->m_x - o, p, d, skipped);
-  const btScalar m = ctx.mrg + (o - node.m_q).length() * 2;
+  const btScalar m = motion_term ? ctx.mrg + (o - node.m_q).length() * 2 : ctx.mrg;
   if (d < (m * m)) {
     if (!robust || d > 0) {
       const btSoftBody::Node* n[] = {face.m_n[0], face.m_n[1], face.m_n[2]};
@@ -162,10 +163,13 @@ ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::
 }
 
 /// Continuous: a node that passed through the face during the step (and ends behind it) gets a
-/// contact back to the side it came from, replacing the discrete one; otherwise Robust.
+/// contact back to the side it came from, replacing the discrete one; otherwise Robust's test
+/// within the margins alone. Bullet's motion term (2·|m_x − m_q|) is what stands in for a
+/// continuous test in CollideVF_SS; with the crossing test it is not needed, and its contacts
+/// push a fast node out to twice its step, i.e. throw it back faster than it came.
 ContactKind continuousTest(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
                            btSoftBody::SContact& contact) {
-  const ContactKind discrete = discreteTest(true, ctx, node, face, contact);
+  const ContactKind discrete = discreteTest(true, ctx, node, face, contact, false);
   const std::array<Vec3, 4> start{toVec(node.m_q), toVec(face.m_n[0]->m_q), toVec(face.m_n[1]->m_q),
                                   toVec(face.m_n[2]->m_q)};
   const std::array<Vec3, 4> end{toVec(node.m_x), toVec(face.m_n[0]->m_x), toVec(face.m_n[1]->m_x),

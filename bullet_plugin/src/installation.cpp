@@ -66,10 +66,18 @@ std::pair<const psc::CandidatePair*, const psc::CandidatePair*> candidatesOf(
   return {base + (first - candidates.begin()), base + (last - candidates.begin())};
 }
 
+/// The core's settings for this plugin: Continuous's crossing test needs every pair that meets
+/// during the step (MotionBound::Swept), not Bullet's radius about the end positions.
+psc::SensorSettings coreSettings(const Settings& settings) {
+  psc::SensorSettings core = settings.sensors;
+  if (settings.exact == ExactTest::Continuous) core.motion_bound = psc::MotionBound::Swept;
+  return core;
+}
+
 }  // namespace
 
 Installation::Installation(btSoftRigidDynamicsWorld& world, const Settings& settings)
-    : world_(world), dispatcher_(collisionDispatcherOf(world)), settings_(settings), sensors_(settings.sensors) {
+    : world_(world), dispatcher_(collisionDispatcherOf(world)), settings_(settings), sensors_(coreSettings(settings)) {
   if (settings.exact != ExactTest::Bullet && settings.exact != ExactTest::Robust &&
       settings.exact != ExactTest::Continuous)
     throw psc::Error(psc::ErrorCode::InvalidSettings,

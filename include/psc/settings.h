@@ -19,6 +19,21 @@ enum class Flagging {
   Bounds,
 };
 
+/// How a vertex's motion over the step (previous → current position) widens what it can touch.
+/// Only used when a body has a previous-position view.
+enum class MotionBound {
+  /// Default: a vertex reaches margin_A + margin_B + motion_factor·|x_v − x_v,prev| around its
+  /// current position, against triangles at their current positions: Bullet's CollideVF_SS
+  /// acceptance radius (motion_factor = 2).
+  Radius,
+  /// Every (vertex, triangle) pair that comes within margin_A + margin_B of each other at some time
+  /// of the step, both moving linearly: the vertex's path against the triangle's swept volume (the
+  /// box of its six positions). For continuous tests; motion_factor is not used. A fast vertex
+  /// reaches half its step around its path's midpoint instead of twice its step around its end.
+  /// Flagging::Sensors (the thesis's mode) does not support it.
+  Swept,
+};
+
 
 enum class AreaEstimator {
   FourDirectionWalk,  ///< thesis §3.6: walk ±X, ±Y in the particle's tangent plane, area = rectangle
@@ -56,6 +71,7 @@ struct SensorSettings {
   ///   margin_A + margin_B + motion_factor·|x_v − x_v,prev|     (length units)
   /// Bullet's CollideVF_SS uses 2. Only used when a body has a previous-position view. ≥ 0.
   double motion_factor = 2.0;
+  MotionBound motion_bound = MotionBound::Radius;
   /// [beyond] A body gets at most (vertices in triangles / min_region_vertices) particles from the
   /// budget (at least 1; an explicit BodyDesc::particles is not capped). The thesis's budget counts
   /// parts, not vertices: 8 HACD parts × 12 give a 500-vertex torus ~100 regions of 5 vertices.

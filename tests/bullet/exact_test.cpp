@@ -431,13 +431,21 @@ TEST(ExactTests, ContinuousPushesANodeThatPassedThroughBackToItsSide) {
   EXPECT_EQ(rig.run(ExactTest::Robust, robust), ContactKind::None);
   ASSERT_EQ(rig.run(ExactTest::Continuous, continuous), ContactKind::Crossing);
   EXPECT_NEAR(double(continuous.m_normal.z()), 1.0, 1e-6);  // the node started above the face
-  // 3. Passing beside the face, or approaching without crossing: Continuous is Robust, bit for bit.
+  // 3. Passing beside the face, or approaching without crossing: Continuous is Robust within the
+  //    margins alone (no motion term), so its contact differs only in m_margin.
   place({0, 0, 0}, {btScalar(1.2), btScalar(1.2), tenth}, {btScalar(1.2), btScalar(1.2), -tenth});
   EXPECT_EQ(rig.run(ExactTest::Continuous, continuous), ContactKind::None);
   place({0, 0, 0}, {quarter, quarter, tenth}, {quarter, quarter, btScalar(0.005)});
   ASSERT_EQ(rig.run(ExactTest::Robust, robust), ContactKind::Bullet);
   ASSERT_EQ(rig.run(ExactTest::Continuous, continuous), ContactKind::Bullet);
+  EXPECT_EQ(continuous.m_margin, btScalar(0.02));
+  EXPECT_GT(robust.m_margin, btScalar(0.2)) << "Bullet's radius: margins + 2 * 0.095";
+  robust.m_margin = continuous.m_margin;
   EXPECT_TRUE(psc_test::sameContact(robust, continuous));
+  // 4. Approaching, 0.05 from the face at the end: inside Bullet's radius, outside the margins.
+  place({0, 0, 0}, {quarter, quarter, tenth}, {quarter, quarter, btScalar(0.05)});
+  EXPECT_EQ(rig.run(ExactTest::Robust, robust), ContactKind::Bullet);
+  EXPECT_EQ(rig.run(ExactTest::Continuous, continuous), ContactKind::None);
 }
 
 // --- the plugin ---------------------------------------------------------------------------------

@@ -568,6 +568,78 @@ TEST(HardConditions, FastBodyCrossingSeveralRegionsPerStepLosesNoContact) {
   EXPECT_GT(contacts, 100u);
 }
 
+// MotionBound::Swept: every (vertex, triangle) pair that comes within the margins at some time of
+// the step (both moving linearly) is a candidate. Reference: the distance at 65 times of the step
+// (a pair found at a sampled time certainly meets the margins), by brute force. Both bodies move,
+// every vertex with its own random jitter, and the ball crosses several regions per step.
+TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
+  std::vector<Body> bodies(2);
+  bodies[0].mesh = makePatch(6.0, 6.0, 25, 25);
+  bodies[0].particles = 64;
+  bodies[0].name = "sheet";
+  bodies[1].mesh = makeIcosphere(0.4, 2);
+  bodies[1].name = "ball";
+  for (Body& b : bodies) b.margin = 0.02;
+  const TriMesh sheet_rest = bodies[0].mesh, ball_rest = bodies[1].mesh;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> jitter(-0.03, 0.03);
+  const auto pose = [&](int step, std::vector<Vec3>& sheet, std::vector<Vec3>& ball) {
+    sheet = sheet_rest.vertices;
+    for (Vec3& p : sheet) p += Vec3(jitter(rng), jitter(rng), 0.1 * step + jitter(rng));
+    ball = ball_rest.vertices;
+    for (Vec3& p : ball) p += Vec3(-2.5 + 0.9 * step, -1.0 + 0.5 * step, 1.2 - 0.35 * step) + Vec3(jitter(rng), jitter(rng), jitter(rng));
+  };
+  std::vector<Vec3> prev_sheet, prev_ball;
+  pose(0, prev_sheet, prev_ball);
+  bodies[0].mesh.vertices = prev_sheet;
+  bodies[1].mesh.vertices = prev_ball;
+  SensorSettings settings;
+  settings.motion_bound = MotionBound::Swept;
+  SensorWorld swept(settings), radius;
+  addAll(swept, bodies);
+  for (Body& b : bodies) b.id = radius.addBody(descOf(b));
+  std::size_t met = 0, candidates_swept = 0, candidates_radius = 0;
+  for (int step = 1; step <= 6; ++step) {
+    std::vector<Vec3> sheet, ball;
+    pose(step, sheet, ball);
+    bodies[0].previous = prev_sheet;
+    bodies[1].previous = prev_ball;
+    bodies[0].mesh.vertices = sheet;
+    bodies[1].mesh.vertices = ball;
+    for (SensorWorld* w : {&swept, &radius})
+      for (Body& b : bodies)
+        w->setPositions(b.id, PositionView::of(b.mesh.vertices), PositionView::of(b.previous));
+    const StepResult& res = swept.step();
+    std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
+    for (const CandidatePair& c : res.candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+    candidates_swept += res.candidates.size();
+    candidates_radius += radius.step().candidates.size();
+    const double r = bodies[0].margin + bodies[1].margin;
+    for (int i = 0; i < 2; ++i) {
+      const Body &a = bodies[i], &b = bodies[1 - i];
+      for (Index v = 0; v < a.mesh.vertices.size(); ++v)
+        for (Index t = 0; t < b.mesh.triangles.size(); ++t) {
+          const Triangle& tri = b.mesh.triangles[t];
+          bool meets = false;
+          for (int k = 0; k <= 64 && !meets; ++k) {
+            const double s = k / 64.0;
+            const auto at = [&](const Body& x, Index u) { return Vec3((1 - s) * x.previous[u] + s * x.mesh.vertices[u]); };
+            meets = test::pointTriangleDistance(at(a, v), at(b, tri[0]), at(b, tri[1]), at(b, tri[2])) < r;
+          }
+          if (!meets) continue;
+          ++met;
+          EXPECT_EQ(cand.count({a.id, v, b.id, t}), 1u)
+              << "step " << step << ": " << a.name << " vertex " << v << " meets " << b.name << " triangle " << t;
+        }
+    }
+    prev_sheet = sheet;
+    prev_ball = ball;
+  }
+  EXPECT_GT(met, 50u) << "the ball must cross the sheet";
+  // A fast vertex reaches half its step about its path's midpoint, not twice its step about its end.
+  EXPECT_LT(candidates_swept, candidates_radius / 2) << "swept " << candidates_swept << ", radius " << candidates_radius;
+}
+
 TEST(HardConditions, StretchedToTwiceItsSizeRepartitionsAndStillFindsContacts) {
   std::vector<Body> bodies(2);
   bodies[0].mesh = makeSphere(1.0, 400);

@@ -113,8 +113,9 @@ INSTANTIATE_TEST_SUITE_P(Catalog, EveryScene, ::testing::ValuesIn(sceneNames()),
                          [](const ::testing::TestParamInfo<std::string>& param_info) { return param_info.param; });
 
 TEST(Scenes, CatalogFollowsTheBenchmarkNumbering) {
-  EXPECT_EQ(sceneCatalog().size(), 9u);
-  for (const char* key : {"1", "2", "2a", "2b", "3", "4", "5", "6", "7", "8", "head_on", "mesh"})
+  EXPECT_EQ(sceneCatalog().size(), 11u);
+  for (const char* key : {"1", "2", "2a", "2b", "3", "4", "5", "6", "7", "8", "9", "10", "head_on", "mesh", "projectile",
+                          "fast_cloth"})
     EXPECT_NE(findScene(key), nullptr) << key;
   try {
     makeScene("nonsense", {});
@@ -123,6 +124,20 @@ TEST(Scenes, CatalogFollowsTheBenchmarkNumbering) {
     EXPECT_NE(std::string(e.what()).find("unknown scene 'nonsense'"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("tori_pile"), std::string::npos) << "the message lists the scenes";
   }
+}
+
+TEST(Scenes, FastClothIsPinnedAtItsFourCorners) {
+  const Scene s = makeScene("fast_cloth", {});
+  ASSERT_EQ(s.bodies.size(), 2u);
+  const SoftBodySpec& cloth = s.bodies[0];
+  ASSERT_EQ(cloth.pinned.size(), 4u);
+  double lo_x = 1e9, hi_x = -1e9;
+  for (const Vec3& v : cloth.mesh.vertices) lo_x = std::min(lo_x, v.x()), hi_x = std::max(hi_x, v.x());
+  for (Index v : cloth.pinned) {
+    const double x = cloth.mesh.vertices.at(v).x();
+    EXPECT_TRUE(x == lo_x || x == hi_x) << "pinned vertex " << v << " is not on the cloth's border";
+  }
+  EXPECT_LT(s.bodies[1].velocity.y(), -10.0) << "the ball is fast";
 }
 
 TEST(Scenes, DeterministicAndHonourTheirParameters) {
