@@ -1,5 +1,6 @@
 // The benchmark's crossing and tunnelling counts (demos/crossings.h): the two tests on cases whose
 // answer is known, and the grid against brute force on random meshes and on a real scene's bodies.
+// Its own executable: ctest names these crossings.<suite>.<test>.
 #include "crossings.h"
 #include "scenes.h"
 
@@ -15,20 +16,20 @@ namespace {
 
 const Vec3 kA(0, 0, 0), kB(1, 0, 0), kC(0, 1, 0);  // a triangle in the plane z = 0
 
-TEST(CrossingsSegment, ThroughTheInteriorCrossesOnce) {
+TEST(Segment, ThroughTheInteriorCrossesOnce) {
   EXPECT_TRUE(segmentCrossesTriangle({0.2, 0.2, -1}, {0.2, 0.2, 1}, kA, kB, kC));
   EXPECT_TRUE(segmentCrossesTriangle({0.2, 0.2, 1}, {0.3, 0.1, -1}, kA, kB, kC));  // either direction, slanted
   EXPECT_TRUE(segmentCrossesTriangle({0.2, 0.2, -1}, {0.2, 0.2, 1}, kA, kC, kB));  // either winding
 }
 
-TEST(CrossingsSegment, MissingOrStoppingShortDoesNotCross) {
+TEST(Segment, MissingOrStoppingShortDoesNotCross) {
   EXPECT_FALSE(segmentCrossesTriangle({2, 2, -1}, {2, 2, 1}, kA, kB, kC));        // beside it
   EXPECT_FALSE(segmentCrossesTriangle({0.2, 0.2, -1}, {0.2, 0.2, -0.1}, kA, kB, kC));  // stops short
   EXPECT_FALSE(segmentCrossesTriangle({0.2, 0.2, 0.5}, {0.2, 0.2, 1}, kA, kB, kC));   // above it
   EXPECT_FALSE(segmentCrossesTriangle({0.2, 0.2, -1}, {0.2, 0.2, 0}, kA, kB, kC));    // ends on it: touching
 }
 
-TEST(CrossingsSegment, DegenerateInputsAreNoCrossing) {
+TEST(Segment, DegenerateInputsAreNoCrossing) {
   EXPECT_FALSE(segmentCrossesTriangle({-1, 0.2, 0}, {2, 0.2, 0}, kA, kB, kC));    // coplanar, through it
   EXPECT_FALSE(segmentCrossesTriangle({0.2, 0.2, 0}, {0.2, 0.2, 0}, kA, kB, kC)); // zero length, on it
   EXPECT_FALSE(segmentCrossesTriangle({0.5, 0, -1}, {0.5, 0, 1}, kA, kB, kC));    // through an edge exactly
@@ -39,7 +40,7 @@ TEST(CrossingsSegment, DegenerateInputsAreNoCrossing) {
   EXPECT_FALSE(segmentCrossesTriangle({nan, 0.2, -1}, {0.2, 0.2, 1}, kA, kB, kC));
 }
 
-TEST(CrossingsSegment, NearASharedEdgeExactlyOneOfTheTwoTrianglesCounts) {
+TEST(Segment, NearASharedEdgeExactlyOneOfTheTwoTrianglesCounts) {
   // Two consistently wound triangles sharing the diagonal (0,0,0)-(1,1,0) of the unit square.
   const Vec3 a(0, 0, 0), b(1, 0, 0), c(1, 1, 0), d(0, 1, 0);
   for (double off : {1e-15, -1e-15, 1e-12, -1e-12, 1e-9, -3e-9}) {
@@ -52,7 +53,7 @@ TEST(CrossingsSegment, NearASharedEdgeExactlyOneOfTheTwoTrianglesCounts) {
 /// A one-triangle body: the triangle (0, 1, 2).
 CrossingMesh oneTriangle() { return crossingMesh({{0, 1, 2}}); }
 
-TEST(CrossingsCount, TwoTrianglesPassingThroughEachOtherCrossTwice) {
+TEST(Count, TwoTrianglesPassingThroughEachOtherCrossTwice) {
   // Their intersection is a segment with an end on each: one edge of each crosses the other.
   const std::vector<CrossingMesh> meshes = {oneTriangle(), oneTriangle()};
   const BodyPositions x = {{kA, kB, kC}, {{0.2, 0.2, -1}, {0.2, 0.2, 1}, {0.2, 3, 0}}};
@@ -69,12 +70,12 @@ TEST(CrossingsCount, TwoTrianglesPassingThroughEachOtherCrossTwice) {
   EXPECT_EQ(counter.edgeCrossings(one, both), 0u);
 }
 
-TEST(CrossingsTunnel, VertexThroughAStaticTriangleTunnels) {
+TEST(Tunnel, VertexThroughAStaticTriangleTunnels) {
   EXPECT_TRUE(vertexTunnels({0.2, 0.2, 1}, {0.2, 0.2, -1}, kA, kB, kC, kA, kB, kC));
   EXPECT_TRUE(vertexTunnels({0.2, 0.2, -1}, {0.3, 0.1, 1}, kA, kB, kC, kA, kB, kC));
 }
 
-TEST(CrossingsTunnel, VertexStoppingShortOrOnItOrBesideItDoesNot) {
+TEST(Tunnel, VertexStoppingShortOrOnItOrBesideItDoesNot) {
   EXPECT_FALSE(vertexTunnels({0.2, 0.2, 1}, {0.2, 0.2, 0.1}, kA, kB, kC, kA, kB, kC));  // stops short
   EXPECT_FALSE(vertexTunnels({0.2, 0.2, 1}, {0.2, 0.2, 0}, kA, kB, kC, kA, kB, kC));    // stops on it
   EXPECT_FALSE(vertexTunnels({0.2, 0.2, 0}, {0.2, 0.2, 1}, kA, kB, kC, kA, kB, kC));    // leaves from it
@@ -82,7 +83,7 @@ TEST(CrossingsTunnel, VertexStoppingShortOrOnItOrBesideItDoesNot) {
   EXPECT_FALSE(vertexTunnels({0.2, 0.2, 1}, {0.2, 0.2, 1}, kA, kB, kC, kA, kB, kC));    // still
 }
 
-TEST(CrossingsTunnel, MovingTriangles) {
+TEST(Tunnel, MovingTriangles) {
   const Vec3 up(0, 0, 2);
   // The triangle sweeps over a still vertex.
   EXPECT_TRUE(vertexTunnels({0.2, 0.2, 1}, {0.2, 0.2, 1}, kA, kB, kC, kA + up, kB + up, kC + up));
@@ -99,7 +100,7 @@ TEST(CrossingsTunnel, MovingTriangles) {
   EXPECT_FALSE(vertexTunnels({-1, 0.2, 0}, {2, 0.2, 0}, kA, kB, kC, kA, kB, kC));
 }
 
-TEST(CrossingsCount, TunnelledVerticesCountEachVertexOnceAndSkipContacts) {
+TEST(Count, TunnelledVerticesCountEachVertexOnceAndSkipContacts) {
   // Body 1's vertex 0 dives through body 0's triangle; its other vertices stay far away.
   const std::vector<CrossingMesh> meshes = {oneTriangle(), oneTriangle()};
   const BodyPositions before = {{kA, kB, kC}, {{0.2, 0.2, 1}, {5, 5, 1}, {5, 6, 1}}};
@@ -122,7 +123,7 @@ TEST(CrossingsCount, TunnelledVerticesCountEachVertexOnceAndSkipContacts) {
   EXPECT_EQ(counter.tunnelledVertices(stacked, b2, a2, {}), 1u);
 }
 
-TEST(CrossingsCount, NonFinitePositionsAreNotCounted) {
+TEST(Count, NonFinitePositionsAreNotCounted) {
   const std::vector<CrossingMesh> meshes = {oneTriangle(), oneTriangle()};
   const double nan = std::nan("");
   BodyPositions x = {{kA, kB, kC}, {{0.2, 0.2, -1}, {0.2, 0.2, 1}, {nan, 3, 0}}};
@@ -135,7 +136,7 @@ TEST(CrossingsCount, NonFinitePositionsAreNotCounted) {
   EXPECT_EQ(counter.tunnelledVertices(meshes, x, inf, {}), 0u);
 }
 
-TEST(CrossingsEdges, EachUndirectedEdgeOnce) {
+TEST(Edges, EachUndirectedEdgeOnce) {
   // Two triangles sharing an edge, one wound the other way, and a degenerate one.
   const std::vector<Edge> e = meshEdges({{0, 1, 2}, {2, 1, 3}, {1, 2, 1}, {4, 4, 4}});
   EXPECT_EQ(e, (std::vector<Edge>{{0, 1}, {0, 2}, {1, 2}, {1, 3}, {2, 3}}));
@@ -196,7 +197,7 @@ RandomBodies randomBodies(std::uint64_t seed, int bodies, double spread, double 
   return r;
 }
 
-TEST(CrossingsGrid, EqualsBruteForceOnRandomMeshes) {
+TEST(Grid, EqualsBruteForceOnRandomMeshes) {
   CrossingCounter counter;  // one counter throughout: its buffers are reused
   std::size_t crossings_seen = 0, tunnelled_seen = 0, empty_cases = 0;
   for (std::uint64_t seed = 1; seed <= 16; ++seed) {
@@ -223,7 +224,7 @@ TEST(CrossingsGrid, EqualsBruteForceOnRandomMeshes) {
   EXPECT_GE(empty_cases, 8u);
 }
 
-TEST(CrossingsGrid, EqualsBruteForceOnTwoSpheresPushedTogether) {
+TEST(Grid, EqualsBruteForceOnTwoSpheresPushedTogether) {
   SceneParams params;
   params.resolution = 300;
   const Scene scene = makeScene("head_on", params);
