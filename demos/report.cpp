@@ -137,6 +137,9 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["series"] = r.series;
   j["vertices"] = r.vertices;
   j["scale"] = r.scale;
+  j["intersections_max"] = r.intersections_max;
+  j["intersections_steps"] = r.intersections_steps;
+  j["tunnelled_vertices"] = {{"total", r.tunnelled_total}, {"worst_step", r.tunnelled_worst_step}};
   if (r.has_strict) {
     j["recall_strict_bullet_testable"] = r.recall_strict_testable;
     j["truth_strict_untestable_by_bullet"] = r.truth_strict_untestable;
@@ -163,6 +166,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["detect_ms_median"] = r.stage_ms_median.detect;
   const StepTimes& mean = r.stage_ms_mean;
   const StepTimes& median = r.stage_ms_median;
+  j["crossings_ms_mean"] = mean.crossings;  // measurement, not the pipeline's
   j["face_refit_ms_mean"] = mean.face_refit;
   j["face_refit_ms_median"] = median.face_refit;
   // Bullet's traversal and exact tests; for ours the pairs handed back to Bullet (normally none).
@@ -236,11 +240,20 @@ void writeJson(const std::string& path, const MachineInfo& machine, const std::v
 
 void writeCsv(const std::string& path, const std::vector<RunResult>& runs) {
   std::ofstream out = openOut(path);
-  // Every key that any run has, required ones first; empty cells where a key does not apply.
+  // Every key that any run has, required ones first; empty cells where a key does not apply. An
+  // object's members become columns of their own, named key.member.
   std::vector<std::string> keys = requiredRunKeys();
   std::vector<nlohmann::ordered_json> rows;
   for (const RunResult& r : runs) {
-    rows.push_back(toJson(r));
+    const nlohmann::ordered_json run = toJson(r);
+    rows.emplace_back();
+    for (const auto& item : run.items()) {
+      if (!item.value().is_object()) {
+        rows.back()[item.key()] = item.value();
+        continue;
+      }
+      for (const auto& member : item.value().items()) rows.back()[item.key() + "." + member.key()] = member.value();
+    }
     for (const auto& item : rows.back().items())
       if (std::find(keys.begin(), keys.end(), item.key()) == keys.end()) keys.push_back(item.key());
   }

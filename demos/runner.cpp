@@ -2,6 +2,7 @@
 
 #include "bullet_probe.h"
 #include "bullet_scene.h"
+#include "crossings.h"
 #include "ground_truth.h"
 #include "psc/error.h"
 #include "sensor_pipeline.h"
@@ -44,6 +45,17 @@ void extractBodies(SceneWorld& sw, std::vector<TruthBody>& out, bool with_prev) 
     if (b.triangles.empty()) b.triangles = sw.scene().bodies[i].mesh.triangles;
     b.margin = psb->getCollisionShape()->getMargin();
     b.closed = sw.scene().bodies[i].closed;
+  }
+}
+
+/// Every soft body's node positions (m_x), one vector per body.
+void copyPositions(SceneWorld& sw, BodyPositions& out) {
+  const auto& soft = sw.softBodies();
+  out.resize(soft.size());
+  for (std::size_t i = 0; i < soft.size(); ++i) {
+    const btSoftBody* psb = soft[i];
+    out[i].resize(static_cast<std::size_t>(psb->m_nodes.size()));
+    for (int v = 0; v < psb->m_nodes.size(); ++v) out[i][static_cast<std::size_t>(v)] = toVec(psb->m_nodes[v].m_x);
   }
 }
 
@@ -189,6 +201,9 @@ class Run {
   bool diverged();
   /// After the step: vertices inside another closed body beyond the margins.
   void measurePenetration(StepRecord& rec);
+  /// After the step: edge–triangle crossings between bodies, and the vertices that passed through
+  /// another body's triangle during it without a soft-soft contact.
+  void measureCrossings(StepRecord& rec);
   void writeFrame(std::size_t step);
   bool writesFrame(std::size_t step) const {
     return frames_ && step % std::max<std::size_t>(1, opt_.frame_every) == 0;
@@ -217,6 +232,12 @@ class Run {
   std::vector<TruthBody> bodies_;
   std::vector<ContactKey> found_;
   std::set<PairKey> truth_pairs_, found_pairs_;
+  std::vector<CrossingMesh> crossing_meshes_;  ///< body i = scene.bodies[i]'s triangles
+  CrossingCounter crossings_;
+  /// Node positions before the step, copied before stepSimulation: m_q is the step's start only
+  /// until Bullet's drift solve (diterations > 0) overwrites it.
+  BodyPositions before_, after_;
+  std::vector<std::vector<char>> had_contact_;  ///< per body and node: in a soft-soft contact this step
   std::unique_ptr<FrameSeries> frames_;
   double far_out_ = 1.0;             ///< far enough out to mean the simulation blew up
   StepRecord* current_ = nullptr;    ///< the record of the step under way
@@ -253,6 +274,7 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
   for (const SoftBodySpec& b : scene.bodies)
     for (const Vec3& v : b.mesh.vertices) far_out_ = std::max(far_out_, v.cwiseAbs().maxCoeff());
   far_out_ *= 1000.0;
+  for (const SoftBodySpec& b : scene.bodies) crossing_meshes_.push_back(crossingMesh(b.mesh.triangles));
   if (!opt.frames_dir.empty()) {
     frames_ = std::make_unique<FrameSeries>(
         opt.frames_dir, opt.frames_name.empty() ? scene.name + "_" + toString(pipeline) : opt.frames_name);
@@ -264,9 +286,13 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
 
 void Run::step(StepRecord& rec) {
   current_ = &rec;
+  const auto c0 = Clock::now();
+  copyPositions(world_, before_);
+  rec.ms.crossings = msSince(c0);
   const auto t0 = Clock::now();
   world_.step();
   rec.ms.step = msSince(t0) - rec.ms.hooks;
+  rec.ms.hooks += rec.ms.crossings;  // the copy, outside stepSimulation
   rec.ms.face_refit = world_.softSolver().lastFaceRefitMs();
   rec.ms.traversal_exact = zone_.takeMs();  // ours: pairs handed back to Bullet
   zone_.takeCount();
@@ -325,6 +351,19 @@ void Run::measurePenetration(StepRecord& rec) {
   const Penetration pen = psc::demo::measurePenetration(bodies_, pen_grid_);
   rec.n.penetrating_vertices = pen.vertices;
   if (pen.vertices) rec.max_penetration = pen.max_depth;
+}
+
+void Run::measureCrossings(StepRecord& rec) {
+  const auto t0 = Clock::now();
+  copyPositions(world_, after_);
+  had_contact_.resize(after_.size());
+  for (std::size_t b = 0; b < after_.size(); ++b) had_contact_[b].assign(after_[b].size(), 0);
+  for (const ContactKey& k : found_) had_contact_[k.vertex_body][k.vertex] = 1;
+  rec.n.edge_crossings = crossings_.edgeCrossings(crossing_meshes_, after_);
+  rec.n.tunnelled_vertices = crossings_.tunnelledVertices(crossing_meshes_, before_, after_, had_contact_);
+  const double took = msSince(t0);
+  rec.ms.crossings += took;
+  rec.ms.hooks += took;
 }
 
 void Run::writeFrame(std::size_t step) {
@@ -415,6 +454,10 @@ void summariseCounts(RunResult& r) {
       ++r.penetration_steps;
       r.max_penetration = std::max(r.max_penetration, rec.max_penetration);
     }
+    r.intersections_max = std::max(r.intersections_max, n.edge_crossings);
+    r.intersections_steps += n.edge_crossings > 0;
+    r.tunnelled_total += n.tunnelled_vertices;
+    r.tunnelled_worst_step = std::max(r.tunnelled_worst_step, n.tunnelled_vertices);
   }
   const double steps = static_cast<double>(r.steps);
   r.recall_strict = r.truth_strict_total ? double(r.found_in_strict) / double(r.truth_strict_total) : 1.0;
@@ -434,7 +477,8 @@ void summariseCounts(RunResult& r) {
 /// median over the timed steps that found a contact.
 void summariseTimes(RunResult& r) {
   static constexpr double StepTimes::*kParts[] = {
-      &StepTimes::step,        &StepTimes::hooks,    &StepTimes::truth,      &StepTimes::detect,
+      &StepTimes::step,        &StepTimes::hooks,    &StepTimes::truth,      &StepTimes::crossings,
+      &StepTimes::detect,
       &StepTimes::face_refit,  &StepTimes::traversal_exact, &StepTimes::sensor_step, &StepTimes::exact,
       &StepTimes::particle,    &StepTimes::refit,    &StepTimes::flagging,   &StepTimes::candidates,
       &StepTimes::repartition, &StepTimes::core_total};
@@ -478,6 +522,7 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
       r.steps = step + 1;
       break;
     }
+    run.measureCrossings(rec);
     if (opt.penetration) run.measurePenetration(rec);
     if (run.writesFrame(step)) run.writeFrame(step);
   }

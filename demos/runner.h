@@ -21,6 +21,9 @@
 // Excluded from all: the node-tree refit in predictMotion (Bullet always does it; soft-rigid
 // uses that tree), broadphase, soft-rigid collision, the solvers.
 // Step ms: wall time of stepSimulation minus the time the measurement hooks took inside it.
+// After every step (always, whatever the truth mode) the runner counts edge–triangle crossings
+// between bodies and tunnelled vertices (crossings.h), on node positions copied before
+// stepSimulation and read after it; that time goes to StepTimes::hooks, not to the pipeline.
 // Times are summarised over the timed steps (after the warm-up): means, medians, and the median
 // over the timed steps in which the pipeline found at least one soft-soft contact.
 #pragma once
@@ -100,6 +103,12 @@ struct RunResult {
   StepTimes stage_ms_mean, stage_ms_median;  ///< every part of StepTimes, mean and median
   double max_penetration = 0.0;
   std::size_t penetration_steps = 0;
+  /// Edge–triangle crossings between bodies after a step (StepCounts::edge_crossings): the most in
+  /// one step, and the steps with any.
+  std::size_t intersections_max = 0, intersections_steps = 0;
+  /// Vertices that passed through another body's triangle during a step without a soft-soft contact
+  /// (StepCounts::tunnelled_vertices): summed over the steps, and the most in one step.
+  std::size_t tunnelled_total = 0, tunnelled_worst_step = 0;
   /// First step after which a node position was non-finite or absurdly far out (1000 scene
   /// extents): the simulation blew up and the run stopped there; -1 = it did not.
   long diverged_at_step = -1;

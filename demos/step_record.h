@@ -12,8 +12,13 @@ namespace psc::demo {
 /// Wall-clock times of one step, milliseconds.
 struct StepTimes {
   double step = 0.0;             ///< stepSimulation minus `hooks`
-  double hooks = 0.0;            ///< the measurement done inside the step (contacts, truth): not the pipeline's
+  /// The measurement done inside the step (contacts, truth) and the crossing counts around it:
+  /// not the pipeline's.
+  double hooks = 0.0;
   double truth = 0.0;            ///< of `hooks`: the ground truth
+  /// Of `hooks`: the crossing and tunnelling counts (positions copied before the step, counted
+  /// after it).
+  double crossings = 0.0;
   double detect = 0.0;           ///< whole performDiscreteCollisionDetection (a cross-check)
   /// Bullet's face-tree refit, split out of btSoftBody::predictMotion (TimedSoftBodySolver). The
   /// tree exists only for VF_SS: normally 0 for our pipelines.
@@ -53,6 +58,10 @@ struct StepCounts {
   std::size_t truth_strict_untestable = 0;               ///< strict truth on triangles CollideVF_SS refuses
   // After the step.
   std::size_t penetrating_vertices = 0;                  ///< inside another closed body beyond the margins
+  std::size_t edge_crossings = 0;                        ///< (edge, triangle) crossings between bodies (crossings.h)
+  /// Vertices whose path over the step passed through a moving triangle of another body, of those
+  /// that had no soft-soft contact in the step (crossings.h).
+  std::size_t tunnelled_vertices = 0;
 };
 
 struct StepRecord {

@@ -48,6 +48,9 @@ std::string summary(const RunResult& r) {
          " on triangles CollideVF_SS refuses)";
   if (r.has_full) s += ", full " + fmt("%.4f", r.recall_full);
   if (r.penetration_steps) s += ", penetration " + fmt("%.3f", r.max_penetration);
+  s += ", crossings max " + std::to_string(r.intersections_max) + " (" + std::to_string(r.intersections_steps) +
+       " steps), tunnelled " + std::to_string(r.tunnelled_total) + " (worst step " +
+       std::to_string(r.tunnelled_worst_step) + ")";
   if (r.diverged_at_step >= 0) s += ", DIVERGED after step " + std::to_string(r.diverged_at_step);
   return s;
 }

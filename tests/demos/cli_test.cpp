@@ -84,6 +84,13 @@ TEST(DemoCli, JsonAndCsvHaveTheAgreedKeys) {
     for (const char* key : timing) ASSERT_TRUE(r.contains(key)) << pipeline << " run lacks '" << key << "'";
     EXPECT_EQ(r.at("scene").get<std::string>(), "head_on");
     EXPECT_EQ(r.at("steps").get<int>(), 40);
+    // The crossing counts are there for every pipeline, truth or not, and consistent.
+    EXPECT_LE(r.at("intersections_steps").get<int>(), 40) << pipeline;
+    EXPECT_EQ(r.at("intersections_max").get<int>() > 0, r.at("intersections_steps").get<int>() > 0) << pipeline;
+    const nlohmann::json& tunnelled = r.at("tunnelled_vertices");
+    EXPECT_LE(tunnelled.at("worst_step").get<long>(), tunnelled.at("total").get<long>()) << pipeline;
+    EXPECT_EQ(tunnelled.at("worst_step").get<long>() > 0, tunnelled.at("total").get<long>() > 0) << pipeline;
+    EXPECT_GE(num(r, "crossings_ms_mean"), 0.0) << pipeline;
     if (ours) {
       EXPECT_EQ(r.at("flagging").get<std::string>(), pipeline == "sensors" ? "default" : "bounds");
     }
@@ -142,6 +149,8 @@ TEST(DemoCli, JsonAndCsvHaveTheAgreedKeys) {
   std::string header, line;
   std::getline(csv, header);
   for (const std::string& key : requiredRunKeys()) EXPECT_NE(header.find(key), std::string::npos) << key;
+  // An object of the JSON becomes one column per member.
+  EXPECT_NE(header.find(",tunnelled_vertices.total,tunnelled_vertices.worst_step,"), std::string::npos) << header;
   std::vector<std::string> rows;
   while (std::getline(csv, line))
     if (!line.empty()) rows.push_back(line);

@@ -1,0 +1,258 @@
+// The benchmark's crossing and tunnelling counts (demos/crossings.h): the two tests on cases whose
+// answer is known, and the grid against brute force on random meshes and on a real scene's bodies.
+// Its own executable: ctest names these crossings.<suite>.<test>.
+#include "crossings.h"
+#include "scenes.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+namespace psc::demo {
+namespace {
+
+// --- closed-form cases ---
+
+const Vec3 kA(0, 0, 0), kB(1, 0, 0), kC(0, 1, 0);  // a triangle in the plane z = 0
+
+TEST(Segment, ThroughTheInteriorCrossesOnce) {
+  EXPECT_TRUE(segmentCrossesTriangle({0.2, 0.2, -1}, {0.2, 0.2, 1}, kA, kB, kC));
+  EXPECT_TRUE(segmentCrossesTriangle({0.2, 0.2, 1}, {0.3, 0.1, -1}, kA, kB, kC));  // either direction, slanted
+  EXPECT_TRUE(segmentCrossesTriangle({0.2, 0.2, -1}, {0.2, 0.2, 1}, kA, kC, kB));  // either winding
+}
+
+TEST(Segment, MissingOrStoppingShortDoesNotCross) {
+  EXPECT_FALSE(segmentCrossesTriangle({2, 2, -1}, {2, 2, 1}, kA, kB, kC));        // beside it
+  EXPECT_FALSE(segmentCrossesTriangle({0.2, 0.2, -1}, {0.2, 0.2, -0.1}, kA, kB, kC));  // stops short
+  EXPECT_FALSE(segmentCrossesTriangle({0.2, 0.2, 0.5}, {0.2, 0.2, 1}, kA, kB, kC));   // above it
+  EXPECT_FALSE(segmentCrossesTriangle({0.2, 0.2, -1}, {0.2, 0.2, 0}, kA, kB, kC));    // ends on it: touching
+}
+
+TEST(Segment, DegenerateInputsAreNoCrossing) {
+  EXPECT_FALSE(segmentCrossesTriangle({-1, 0.2, 0}, {2, 0.2, 0}, kA, kB, kC));    // coplanar, through it
+  EXPECT_FALSE(segmentCrossesTriangle({0.2, 0.2, 0}, {0.2, 0.2, 0}, kA, kB, kC)); // zero length, on it
+  EXPECT_FALSE(segmentCrossesTriangle({0.5, 0, -1}, {0.5, 0, 1}, kA, kB, kC));    // through an edge exactly
+  EXPECT_FALSE(segmentCrossesTriangle({0, 0, -1}, {0, 0, 1}, kA, kB, kC));        // through a vertex exactly
+  EXPECT_FALSE(segmentCrossesTriangle({0.2, 0.2, -1}, {0.2, 0.2, 1}, kA, kB, {2, 0, 0}));  // zero area
+  EXPECT_FALSE(segmentCrossesTriangle({0.2, 0.2, -1}, {0.2, 0.2, 1}, kA, kA, kA));         // a point
+  const double nan = std::nan("");
+  EXPECT_FALSE(segmentCrossesTriangle({nan, 0.2, -1}, {0.2, 0.2, 1}, kA, kB, kC));
+}
+
+TEST(Segment, NearASharedEdgeExactlyOneOfTheTwoTrianglesCounts) {
+  // Two consistently wound triangles sharing the diagonal (0,0,0)-(1,1,0) of the unit square.
+  const Vec3 a(0, 0, 0), b(1, 0, 0), c(1, 1, 0), d(0, 1, 0);
+  for (double off : {1e-15, -1e-15, 1e-12, -1e-12, 1e-9, -3e-9}) {
+    const Vec3 p(0.3, 0.3 + off, -1), q(0.3 + 0.1 * off, 0.3, 1);
+    const int hits = int(segmentCrossesTriangle(p, q, a, b, c)) + int(segmentCrossesTriangle(p, q, a, c, d));
+    EXPECT_EQ(hits, 1) << "offset " << off;
+  }
+}
+
+/// A one-triangle body: the triangle (0, 1, 2).
+CrossingMesh oneTriangle() { return crossingMesh({{0, 1, 2}}); }
+
+TEST(Count, TwoTrianglesPassingThroughEachOtherCrossTwice) {
+  // Their intersection is a segment with an end on each: one edge of each crosses the other.
+  const std::vector<CrossingMesh> meshes = {oneTriangle(), oneTriangle()};
+  const BodyPositions x = {{kA, kB, kC}, {{0.2, 0.2, -1}, {0.2, 0.2, 1}, {0.2, 3, 0}}};
+  CrossingCounter counter;
+  EXPECT_EQ(counter.edgeCrossings(meshes, x), 2u);
+  EXPECT_EQ(edgeCrossingsBruteForce(meshes, x), 2u);
+  // Apart: nothing.
+  BodyPositions apart = x;
+  for (Vec3& p : apart[1]) p.x() += 5;
+  EXPECT_EQ(counter.edgeCrossings(meshes, apart), 0u);
+  // A body's own edges never count against its own triangles.
+  const std::vector<CrossingMesh> one = {crossingMesh({{0, 1, 2}, {3, 4, 5}})};
+  const BodyPositions both = {{kA, kB, kC, {0.2, 0.2, -1}, {0.2, 0.2, 1}, {0.2, 3, 0}}};
+  EXPECT_EQ(counter.edgeCrossings(one, both), 0u);
+}
+
+TEST(Tunnel, VertexThroughAStaticTriangleTunnels) {
+  EXPECT_TRUE(vertexTunnels({0.2, 0.2, 1}, {0.2, 0.2, -1}, kA, kB, kC, kA, kB, kC));
+  EXPECT_TRUE(vertexTunnels({0.2, 0.2, -1}, {0.3, 0.1, 1}, kA, kB, kC, kA, kB, kC));
+}
+
+TEST(Tunnel, VertexStoppingShortOrOnItOrBesideItDoesNot) {
+  EXPECT_FALSE(vertexTunnels({0.2, 0.2, 1}, {0.2, 0.2, 0.1}, kA, kB, kC, kA, kB, kC));  // stops short
+  EXPECT_FALSE(vertexTunnels({0.2, 0.2, 1}, {0.2, 0.2, 0}, kA, kB, kC, kA, kB, kC));    // stops on it
+  EXPECT_FALSE(vertexTunnels({0.2, 0.2, 0}, {0.2, 0.2, 1}, kA, kB, kC, kA, kB, kC));    // leaves from it
+  EXPECT_FALSE(vertexTunnels({2, 2, 1}, {2, 2, -1}, kA, kB, kC, kA, kB, kC));           // beside it
+  EXPECT_FALSE(vertexTunnels({0.2, 0.2, 1}, {0.2, 0.2, 1}, kA, kB, kC, kA, kB, kC));    // still
+}
+
+TEST(Tunnel, MovingTriangles) {
+  const Vec3 up(0, 0, 2);
+  // The triangle sweeps over a still vertex.
+  EXPECT_TRUE(vertexTunnels({0.2, 0.2, 1}, {0.2, 0.2, 1}, kA, kB, kC, kA + up, kB + up, kC + up));
+  // Vertex and triangle move together: never on the plane.
+  EXPECT_FALSE(vertexTunnels({0.2, 0.2, 1}, Vec3(0.2, 0.2, 1) + up, kA, kB, kC, kA + up, kB + up, kC + up));
+  // The triangle passes the vertex's path, but to the side of where the vertex is then.
+  EXPECT_FALSE(vertexTunnels({0.2, 0.2, 1}, {0.2, 0.2, 1}, kA + Vec3(5, 0, 0), kB + Vec3(5, 0, 0),
+                             kC + Vec3(5, 0, 0), kA + Vec3(5, 0, 2), kB + Vec3(5, 0, 2), kC + Vec3(5, 0, 2)));
+  // The triangle turns about its edge on the x axis (c moves from (0, 1, 0) to (0, −1, 2)) and
+  // sweeps over a still vertex above it: the root is at t = 0.375, the vertex inside.
+  EXPECT_TRUE(vertexTunnels({0.2, 0.1, 0.3}, {0.2, 0.1, 0.3}, kA, kB, {0, 1, 0}, kA, kB, {0, -1, 2}));
+  // Degenerate: a point-like triangle, and one that is coplanar with the path all along.
+  EXPECT_FALSE(vertexTunnels({0, 0, 1}, {0, 0, -1}, kA, kA, kA, kA, kA, kA));
+  EXPECT_FALSE(vertexTunnels({-1, 0.2, 0}, {2, 0.2, 0}, kA, kB, kC, kA, kB, kC));
+}
+
+TEST(Count, TunnelledVerticesCountEachVertexOnceAndSkipContacts) {
+  // Body 1's vertex 0 dives through body 0's triangle; its other vertices stay far away.
+  const std::vector<CrossingMesh> meshes = {oneTriangle(), oneTriangle()};
+  const BodyPositions before = {{kA, kB, kC}, {{0.2, 0.2, 1}, {5, 5, 1}, {5, 6, 1}}};
+  BodyPositions after = before;
+  after[1][0] = {0.2, 0.2, -1};
+  CrossingCounter counter;
+  EXPECT_EQ(counter.tunnelledVertices(meshes, before, after, {}), 1u);
+  EXPECT_EQ(tunnelledVerticesBruteForce(meshes, before, after, {}), 1u);
+  const std::vector<std::vector<char>> skip = {{0, 0, 0}, {1, 0, 0}};  // it had a contact
+  EXPECT_EQ(counter.tunnelledVertices(meshes, before, after, skip), 0u);
+  // Stopping short of the triangle is no tunnelling.
+  after[1][0] = {0.2, 0.2, 0.05};
+  EXPECT_EQ(counter.tunnelledVertices(meshes, before, after, {}), 0u);
+  // Two triangles under the path: still one vertex.
+  const std::vector<CrossingMesh> stacked = {crossingMesh({{0, 1, 2}, {3, 4, 5}}), oneTriangle()};
+  const Vec3 down(0, 0, -0.5);
+  BodyPositions b2 = {{kA, kB, kC, kA + down, kB + down, kC + down}, before[1]};
+  BodyPositions a2 = b2;
+  a2[1][0] = {0.2, 0.2, -1};
+  EXPECT_EQ(counter.tunnelledVertices(stacked, b2, a2, {}), 1u);
+}
+
+TEST(Count, NonFinitePositionsAreNotCounted) {
+  const std::vector<CrossingMesh> meshes = {oneTriangle(), oneTriangle()};
+  const double nan = std::nan("");
+  BodyPositions x = {{kA, kB, kC}, {{0.2, 0.2, -1}, {0.2, 0.2, 1}, {nan, 3, 0}}};
+  CrossingCounter counter;
+  // Edge (0, 1) of body 1 still crosses; nothing that touches the NaN vertex is counted.
+  EXPECT_EQ(counter.edgeCrossings(meshes, x), edgeCrossingsBruteForce(meshes, x));
+  EXPECT_EQ(counter.edgeCrossings(meshes, x), 1u);
+  const BodyPositions inf = {{kA, kB, kC}, {Vec3::Constant(INFINITY), Vec3::Constant(-INFINITY), {0, 0, nan}}};
+  EXPECT_EQ(counter.edgeCrossings(meshes, inf), 0u);
+  EXPECT_EQ(counter.tunnelledVertices(meshes, x, inf, {}), 0u);
+}
+
+TEST(Edges, EachUndirectedEdgeOnce) {
+  // Two triangles sharing an edge, one wound the other way, and a degenerate one.
+  const std::vector<Edge> e = meshEdges({{0, 1, 2}, {2, 1, 3}, {1, 2, 1}, {4, 4, 4}});
+  EXPECT_EQ(e, (std::vector<Edge>{{0, 1}, {0, 2}, {1, 2}, {1, 3}, {2, 3}}));
+}
+
+// --- the grid against brute force ---
+
+Vec3 randomVec(std::mt19937_64& rng, double lo, double hi) {
+  std::uniform_real_distribution<double> u(lo, hi);
+  return {u(rng), u(rng), u(rng)};
+}
+
+/// A bumpy n×n grid patch of side 1 (2n² triangles), rotated at random and centred at `center`.
+void randomPatch(std::mt19937_64& rng, int n, const Vec3& center, std::vector<Vec3>& x, std::vector<Triangle>& tris) {
+  std::normal_distribution<double> g;
+  const Eigen::Matrix3d rot = Eigen::Quaterniond(g(rng), g(rng), g(rng), g(rng)).normalized().toRotationMatrix();
+  std::uniform_real_distribution<double> bump(-0.05, 0.05);
+  for (int i = 0; i <= n; ++i)
+    for (int j = 0; j <= n; ++j)
+      x.push_back(center + rot * Vec3(double(i) / n - 0.5, double(j) / n - 0.5, bump(rng)));
+  const auto id = [n](int i, int j) { return static_cast<Index>(i * (n + 1) + j); };
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      tris.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+      tris.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+    }
+}
+
+struct RandomBodies {
+  std::vector<CrossingMesh> meshes;
+  BodyPositions before, after;
+  std::vector<std::vector<char>> skip;
+};
+
+/// `bodies` bumpy patches within `spread` of each other (they cross when it is small), then moved
+/// over one step: each translated by up to `motion` plus a little noise per vertex. About one
+/// vertex in ten is marked as having had a contact.
+RandomBodies randomBodies(std::uint64_t seed, int bodies, double spread, double motion) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  RandomBodies r;
+  for (int b = 0; b < bodies; ++b) {
+    std::vector<Vec3> x;
+    std::vector<Triangle> tris;
+    randomPatch(rng, 6 + int(seed % 5), randomVec(rng, -spread, spread), x, tris);
+    const Vec3 shift = randomVec(rng, -motion, motion);
+    std::vector<Vec3> after = x;
+    std::vector<char> skip(x.size());
+    for (std::size_t v = 0; v < x.size(); ++v) {
+      after[v] += shift + randomVec(rng, -0.02, 0.02);
+      skip[v] = u(rng) < 0.1;
+    }
+    r.meshes.push_back(crossingMesh(std::move(tris)));
+    r.before.push_back(std::move(x));
+    r.after.push_back(std::move(after));
+    r.skip.push_back(std::move(skip));
+  }
+  return r;
+}
+
+TEST(Grid, EqualsBruteForceOnRandomMeshes) {
+  CrossingCounter counter;  // one counter throughout: its buffers are reused
+  std::size_t crossings_seen = 0, tunnelled_seen = 0, empty_cases = 0;
+  for (std::uint64_t seed = 1; seed <= 16; ++seed) {
+    // Seeds alternate between crossing piles and bodies far apart.
+    const double spread = seed % 4 == 0 ? 20.0 : 0.3;
+    const RandomBodies r = randomBodies(seed, 2 + int(seed % 3), spread, seed % 2 ? 0.6 : 0.1);
+    const std::string what = "seed " + std::to_string(seed);
+    for (const BodyPositions* x : {&r.before, &r.after}) {
+      const std::size_t brute = edgeCrossingsBruteForce(r.meshes, *x);
+      EXPECT_EQ(counter.edgeCrossings(r.meshes, *x), brute) << what;
+      crossings_seen += brute;
+      empty_cases += brute == 0;
+    }
+    const std::vector<std::vector<char>> none;
+    for (const auto* skip : {&r.skip, &none}) {
+      const std::size_t brute = tunnelledVerticesBruteForce(r.meshes, r.before, r.after, *skip);
+      EXPECT_EQ(counter.tunnelledVertices(r.meshes, r.before, r.after, *skip), brute) << what;
+      tunnelled_seen += brute;
+    }
+  }
+  // The comparison must have had something to compare, and the far-apart seeds nothing.
+  EXPECT_GT(crossings_seen, 100u);
+  EXPECT_GT(tunnelled_seen, 50u);
+  EXPECT_GE(empty_cases, 8u);
+}
+
+TEST(Grid, EqualsBruteForceOnTwoSpheresPushedTogether) {
+  SceneParams params;
+  params.resolution = 300;
+  const Scene scene = makeScene("head_on", params);
+  ASSERT_EQ(scene.bodies.size(), 2u);
+  std::vector<CrossingMesh> meshes;
+  BodyPositions before;
+  for (const SoftBodySpec& b : scene.bodies) {
+    meshes.push_back(crossingMesh(b.mesh.triangles));
+    before.push_back(b.mesh.vertices);
+  }
+  CrossingCounter counter;
+  EXPECT_EQ(counter.edgeCrossings(meshes, before), 0u) << "the scene starts apart";
+  // Body 1 moves 80% of the way to body 0's centre: the surfaces pass through each other.
+  const auto centre = [](const std::vector<Vec3>& x) {
+    Vec3 c = Vec3::Zero();
+    for (const Vec3& p : x) c += p;
+    return Vec3(c / double(x.size()));
+  };
+  const Vec3 shift = 0.8 * (centre(before[0]) - centre(before[1]));
+  BodyPositions after = before;
+  for (Vec3& p : after[1]) p += shift;
+  const std::size_t crossings = counter.edgeCrossings(meshes, after);
+  EXPECT_EQ(crossings, edgeCrossingsBruteForce(meshes, after));
+  EXPECT_GT(crossings, 10u);
+  const std::size_t tunnelled = counter.tunnelledVertices(meshes, before, after, {});
+  EXPECT_EQ(tunnelled, tunnelledVerticesBruteForce(meshes, before, after, {}));
+  EXPECT_GT(tunnelled, 10u);
+}
+
+}  // namespace
+}  // namespace psc::demo
