@@ -137,6 +137,8 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["series"] = r.series;
   j["vertices"] = r.vertices;
   j["scale"] = r.scale;
+  j["runaway_steps"] = r.runaway_steps;
+  j["runaway_warning"] = r.runaway_warning;
   j["intersections_max"] = r.intersections_max;
   j["intersections_steps"] = r.intersections_steps;
   j["tunnelled_vertices"] = {{"total", r.tunnelled_total}, {"worst_step", r.tunnelled_worst_step}};

@@ -8,6 +8,10 @@
 #include "sensor_pipeline.h"
 #include "vtk_writer.h"
 
+#ifdef PSC_DEMO_HAVE_PLUGIN
+#include "psc/bullet/stats.h"
+#endif
+
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -15,6 +19,7 @@
 #include <cmath>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <memory>
 #include <set>
 #include <sstream>
@@ -76,6 +81,32 @@ void collectFound(SceneWorld& sw, std::vector<ContactKey>& out) {
   }
   std::sort(out.begin(), out.end());
   out.erase(std::unique(out.begin(), out.end()), out.end());
+}
+
+/// A body pair with more contacts in one step than this per node of its smaller body is running
+/// away (see psc::bullet::Stats::runaway_pairs): the same rule for every pipeline.
+#ifdef PSC_DEMO_HAVE_PLUGIN
+constexpr std::size_t kRunawayContactsPerNode = psc::bullet::kRunawayContactsPerNode;
+#else
+constexpr std::size_t kRunawayContactsPerNode = 16;
+#endif
+
+/// The body pairs of `found` (sorted) over the runaway rule; a warning for the first of them.
+std::size_t runawayPairs(SceneWorld& sw, const std::vector<ContactKey>& found, std::string& warning) {
+  std::map<std::pair<Index, Index>, std::size_t> per_pair;
+  for (const ContactKey& k : found)
+    ++per_pair[{std::min(k.vertex_body, k.triangle_body), std::max(k.vertex_body, k.triangle_body)}];
+  std::size_t runaways = 0;
+  for (const auto& [pair, contacts] : per_pair) {
+    const auto nodes = static_cast<std::size_t>(
+        std::min(sw.softBodies()[pair.first]->m_nodes.size(), sw.softBodies()[pair.second]->m_nodes.size()));
+    if (contacts <= kRunawayContactsPerNode * nodes) continue;
+    if (++runaways == 1)
+      warning = "runaway contact between bodies " + std::to_string(pair.first) + " and " + std::to_string(pair.second) +
+                ": " + std::to_string(contacts) + " contacts in one step for " + std::to_string(nodes) +
+                " nodes of the smaller body (over " + std::to_string(kRunawayContactsPerNode) + " per node)";
+  }
+  return runaways;
 }
 
 double coordinateScale(const std::vector<TruthBody>& bodies) {
@@ -303,6 +334,7 @@ void Run::step(StepRecord& rec) {
 void Run::afterCollision() {
   collectFound(world_, found_);
   current_->n.contacts_found = found_.size();
+  current_->n.runaway_pairs = runawayPairs(world_, found_, current_->runaway);
   if (pipeline_ == Pipeline::Bullet) current_->n.exact_tests = countVFExactTests(world_.world());
   if (opt_.truth != TruthMode::None) compareWithTruth(*current_);
 }
@@ -454,6 +486,8 @@ void summariseCounts(RunResult& r) {
       ++r.penetration_steps;
       r.max_penetration = std::max(r.max_penetration, rec.max_penetration);
     }
+    if (n.runaway_pairs && r.runaway_steps++ == 0)
+      r.runaway_warning = "step " + std::to_string(&rec - r.per_step.data() + 1) + ": " + rec.runaway;
     r.intersections_max = std::max(r.intersections_max, n.edge_crossings);
     r.intersections_steps += n.edge_crossings > 0;
     r.tunnelled_total += n.tunnelled_vertices;

@@ -106,6 +106,10 @@ struct RunResult {
   /// Edge–triangle crossings between bodies after a step (StepCounts::edge_crossings): the most in
   /// one step, and the steps with any.
   std::size_t intersections_max = 0, intersections_steps = 0;
+  /// Steps in which a body pair had more than 16 contacts per node of its smaller body (a runaway:
+  /// bodies inside each other or too fast for the contact radius), and the first such warning.
+  std::size_t runaway_steps = 0;
+  std::string runaway_warning;
   /// Vertices that passed through another body's triangle during a step without a soft-soft contact
   /// (StepCounts::tunnelled_vertices): summed over the steps, and the most in one step.
   std::size_t tunnelled_total = 0, tunnelled_worst_step = 0;

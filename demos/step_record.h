@@ -58,6 +58,7 @@ struct StepCounts {
   std::size_t truth_strict_untestable = 0;               ///< strict truth on triangles CollideVF_SS refuses
   // After the step.
   std::size_t penetrating_vertices = 0;                  ///< inside another closed body beyond the margins
+  std::size_t runaway_pairs = 0;                         ///< body pairs over the runaway rule (runner.cpp)
   std::size_t edge_crossings = 0;                        ///< (edge, triangle) crossings between bodies (crossings.h)
   /// Vertices whose path over the step passed through a moving triangle of another body, of those
   /// that had no soft-soft contact in the step (crossings.h).
@@ -69,6 +70,7 @@ struct StepRecord {
   StepCounts n;
   double max_penetration = 0.0;  ///< length units, deepest of the penetrating vertices
   std::string error;             ///< the plugin's error or skip reason this step, if any
+  std::string runaway;           ///< the first runaway pair's warning this step, if any
 };
 
 }  // namespace psc::demo

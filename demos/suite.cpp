@@ -51,6 +51,8 @@ std::string summary(const RunResult& r) {
   s += ", crossings max " + std::to_string(r.intersections_max) + " (" + std::to_string(r.intersections_steps) +
        " steps), tunnelled " + std::to_string(r.tunnelled_total) + " (worst step " +
        std::to_string(r.tunnelled_worst_step) + ")";
+  if (r.runaway_steps)
+    s += ", RUNAWAY in " + std::to_string(r.runaway_steps) + " steps (first: " + r.runaway_warning + ")";
   if (r.diverged_at_step >= 0) s += ", DIVERGED after step " + std::to_string(r.diverged_at_step);
   return s;
 }

@@ -156,6 +156,19 @@ void Installation::collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, p
     stats_.robust_contacts += counts.robust;
     stats_.crossing_contacts += counts.crossings;
   }
+  const std::size_t contacts = ab_counts.contacts + ba_counts.contacts;
+  const std::size_t nodes = static_cast<std::size_t>(std::min(a.m_nodes.size(), b.m_nodes.size()));
+  if (contacts > kRunawayContactsPerNode * nodes) {
+    if (++stats_.runaway_pairs == 1) {
+      const btSoftBody::tSoftBodyArray& all = world_.getSoftBodyArray();
+      stats_.runaway = "psc::bullet: runaway contact between soft bodies " +
+                       std::to_string(all.findLinearSearch(&a)) + " and " + std::to_string(all.findLinearSearch(&b)) +
+                       " of the world: " + std::to_string(contacts) + " contacts in one step for " +
+                       std::to_string(nodes) + " nodes of the smaller body (over " +
+                       std::to_string(kRunawayContactsPerNode) +
+                       " per node); they are inside each other or faster than the contact radius follows";
+    }
+  }
   ++stats_.body_pairs;
   stats_.ms_exact += millisecondsSince(start);
 }

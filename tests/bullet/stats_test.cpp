@@ -131,3 +131,29 @@ TEST(Stats, SensorsStepEvenWhenNoSoftPairIsDispatched) {
 }
 
 }  // namespace
+
+// Two spheres in the same place: every node lies within the margins of many faces of the other
+// body, far beyond resting contact; the step reports the pair as a runaway, naming both bodies.
+// Three spheres in a row at rest in contact do not.
+TEST(Stats, RunawayPairsAreReportedWithTheBodiesAndTheContactCount) {
+  psc_test::SoftWorld w(0);
+  psc_test::SoftParams params;
+  params.margin = 0.25;
+  w.addSoft(psc::makeSphere(1.0, 300), params);
+  w.addSoft(psc::makeSphere(1.0, 300).translate({0.01, 0, 0}), params);
+  auto plugin = psc::bullet::install(w.world);
+  w.run(1);
+  const psc::bullet::Stats& s = plugin.stats();
+  EXPECT_GT(s.contacts, psc::bullet::kRunawayContactsPerNode * 300);
+  EXPECT_EQ(s.runaway_pairs, 1u);
+  EXPECT_NE(s.runaway.find("soft bodies 0 and 1"), std::string::npos) << s.runaway;
+  EXPECT_NE(s.runaway.find(std::to_string(s.contacts) + " contacts"), std::string::npos) << s.runaway;
+
+  psc_test::SoftWorld rest(0);
+  psc_test::buildScene(Scene::ThreeInARow, rest);
+  auto quiet = psc::bullet::install(rest.world);
+  for (int step = 0; step < 20; ++step) {
+    rest.run(1);
+    EXPECT_EQ(quiet.stats().runaway_pairs, 0u) << "step " << step << ": " << quiet.stats().runaway;
+  }
+}
