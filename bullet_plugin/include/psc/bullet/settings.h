@@ -31,9 +31,13 @@ enum class ExactTest {
   /// arithmetic skipped the face or an edge as too small, the exact closest point computed in
   /// double with relative thresholds, so no contact depends on the unit of length.
   Robust,
-  /// Robust, plus a continuous test over the step (m_q → m_x, linear motion of the node and of
+  /// Robust's test within the margins alone (no 2·|m_x − m_q| motion term; contact margin = the
+  /// margins), plus a continuous test over the step (m_q → m_x, linear motion of the node and of
   /// the face's nodes): a node that passes through the face during the step gets a contact that
   /// pushes it back to the side it came from (instead of Bullet's, whose normal points through).
+  /// The crossing test does what Bullet's motion term stands in for, without its contacts that
+  /// throw fast nodes back at twice their speed. The plugin runs the core with
+  /// MotionBound::Swept for it: far fewer candidates than Bullet's radius on fast bodies.
   Continuous,
 };
 
@@ -51,7 +55,8 @@ struct Settings {
   /// btCollisionObject::checkCollideWith, deactivation). false: only dispatched pairs are collided.
   bool beyond_broadphase = true;
   /// The exact test on the candidates. Continuous needs the candidates to include every pair whose
-  /// node's segment (m_q → m_x) meets the face's swept volume (exact.h, firstCrossing).
+  /// node's segment (m_q → m_x) meets the face's swept volume (exact.h, firstCrossing): with it the
+  /// plugin sets `sensors.motion_bound` to MotionBound::Swept whatever it says here.
   ExactTest exact = ExactTest::Bullet;
 };
 
