@@ -83,30 +83,27 @@ void collectFound(SceneWorld& sw, std::vector<ContactKey>& out) {
   out.erase(std::unique(out.begin(), out.end()), out.end());
 }
 
-/// A body pair with more contacts in one step than this per node of its smaller body is running
-/// away (see psc::bullet::Stats::runaway_pairs): the same rule for every pipeline.
-#ifdef PSC_DEMO_HAVE_PLUGIN
-constexpr std::size_t kRunawayContactsPerNode = psc::bullet::kRunawayContactsPerNode;
-#else
-constexpr std::size_t kRunawayContactsPerNode = 16;
-#endif
-
-/// The body pairs of `found` (sorted) over the runaway rule; a warning for the first of them.
+/// The body pairs of `found` (sorted) over the plugin's runaway rule (psc::bullet::runawayContacts),
+/// the same for every pipeline; a warning for the first of them. 0 without the plugin.
 std::size_t runawayPairs(SceneWorld& sw, const std::vector<ContactKey>& found, std::string& warning) {
+#ifdef PSC_DEMO_HAVE_PLUGIN
   std::map<std::pair<Index, Index>, std::size_t> per_pair;
   for (const ContactKey& k : found)
     ++per_pair[{std::min(k.vertex_body, k.triangle_body), std::max(k.vertex_body, k.triangle_body)}];
   std::size_t runaways = 0;
   for (const auto& [pair, contacts] : per_pair) {
-    const auto nodes = static_cast<std::size_t>(
-        std::min(sw.softBodies()[pair.first]->m_nodes.size(), sw.softBodies()[pair.second]->m_nodes.size()));
-    if (contacts <= kRunawayContactsPerNode * nodes) continue;
+    const double limit = psc::bullet::runawayContacts(*sw.softBodies()[pair.first], *sw.softBodies()[pair.second]);
+    if (double(contacts) <= limit) continue;
     if (++runaways == 1)
       warning = "runaway contact between bodies " + std::to_string(pair.first) + " and " + std::to_string(pair.second) +
-                ": " + std::to_string(contacts) + " contacts in one step for " + std::to_string(nodes) +
-                " nodes of the smaller body (over " + std::to_string(kRunawayContactsPerNode) + " per node)";
+                ": " + std::to_string(contacts) + " contacts in one step, over " +
+                std::to_string(static_cast<std::size_t>(limit));
   }
   return runaways;
+#else
+  (void)sw, (void)found, (void)warning;
+  return 0;
+#endif
 }
 
 double coordinateScale(const std::vector<TruthBody>& bodies) {
@@ -350,22 +347,26 @@ void Run::compareWithTruth(StepRecord& rec) {
   last_truth_ = &tr;
   rec.ms.truth = msSince(t0);
   StepCounts& n = rec.n;
+  // Triangles CollideVF_SS refuses outright: |cross|² ≤ SIMD_EPSILON.
+  const auto untestable = [&](const ContactKey& k) {
+    const TruthBody& tb = bodies_[k.triangle_body];
+    const Triangle& t = tb.triangles[k.triangle];
+    return (tb.x[t[1]] - tb.x[t[0]]).cross(tb.x[t[2]] - tb.x[t[0]]).squaredNorm() <= double(SIMD_EPSILON);
+  };
   found_pairs_.clear();
   for (const ContactKey& k : found_) {
     found_pairs_.insert(pairOf(k.vertex_body, k.triangle_body));
     const TruthContact* c = tr.find(k);
-    if (c && c->strict == Membership::Inside) ++n.found_in_strict;
+    if (c && c->strict == Membership::Inside) {
+      ++n.found_in_strict;
+      n.found_in_strict_untestable += untestable(k);  // Robust and Continuous find these too
+    }
     if (c && c->full == Membership::Inside) ++n.found_in_full;
     if (full && (!c || c->full == Membership::Outside)) ++n.outside_truth;
   }
   truth_pairs_.clear();
   for (const TruthContact& c : tr.contacts) {
-    if (c.strict == Membership::Inside) {
-      const TruthBody& tb = bodies_[c.key.triangle_body];
-      const Triangle& t = tb.triangles[c.key.triangle];
-      const double cross2 = (tb.x[t[1]] - tb.x[t[0]]).cross(tb.x[t[2]] - tb.x[t[0]]).squaredNorm();
-      n.truth_strict_untestable += cross2 <= double(SIMD_EPSILON);
-    }
+    if (c.strict == Membership::Inside) n.truth_strict_untestable += untestable(c.key);
     const Membership widest = full ? c.full : c.strict;
     if (widest == Membership::Inside) truth_pairs_.insert(pairOf(c.key.vertex_body, c.key.triangle_body));
     n.truth_ambiguous += (c.strict == Membership::Ambiguous || c.full == Membership::Ambiguous);
@@ -479,6 +480,7 @@ void summariseCounts(RunResult& r) {
     r.truth_pairs_found += n.truth_pairs_found;
     r.truth_ambiguous += n.truth_ambiguous;
     r.truth_strict_untestable += n.truth_strict_untestable;
+    r.found_in_strict_untestable += n.found_in_strict_untestable;
     r.truth_seconds += rec.ms.truth / 1000.0;
     if (n.truth_strict) worst_strict = std::min(worst_strict, double(n.found_in_strict) / double(n.truth_strict));
     if (n.truth_full) worst_full = std::min(worst_full, double(n.found_in_full) / double(n.truth_full));
@@ -498,7 +500,8 @@ void summariseCounts(RunResult& r) {
   r.recall_full = r.truth_full_total ? double(r.found_in_full) / double(r.truth_full_total) : 1.0;
   r.recall_strict_worst_step = worst_strict;
   r.recall_strict_testable = r.truth_strict_total > r.truth_strict_untestable
-                                 ? double(r.found_in_strict) / double(r.truth_strict_total - r.truth_strict_untestable)
+                                 ? double(r.found_in_strict - r.found_in_strict_untestable) /
+                                       double(r.truth_strict_total - r.truth_strict_untestable)
                                  : 1.0;
   r.recall_full_worst_step = worst_full;
   r.pair_recall = r.truth_pairs_total ? double(r.truth_pairs_found) / double(r.truth_pairs_total) : 1.0;

@@ -78,7 +78,8 @@ struct RunResult {
   /// Strict-truth contacts on triangles that Bullet's CollideVF_SS refuses outright (|cross|² ≤
   /// SIMD_EPSILON): no pipeline ending in Bullet's exact test can find them.
   std::size_t truth_strict_untestable = 0;
-  double recall_strict_testable = 1.0;     ///< recall over the strict truth without those
+  std::size_t found_in_strict_untestable = 0;  ///< found contacts among those (Robust, Continuous)
+  double recall_strict_testable = 1.0;     ///< recall over the strict truth without those, found and true
   double scale = 1.0;                      ///< SceneParams::scale of the run
   std::size_t contacts_found_total = 0;
   std::size_t contacts_outside_truth = 0;  ///< only with the full truth
@@ -106,8 +107,8 @@ struct RunResult {
   /// Edge–triangle crossings between bodies after a step (StepCounts::edge_crossings): the most in
   /// one step, and the steps with any.
   std::size_t intersections_max = 0, intersections_steps = 0;
-  /// Steps in which a body pair had more than 16 contacts per node of its smaller body (a runaway:
-  /// bodies inside each other or too fast for the contact radius), and the first such warning.
+  /// Steps with a body pair over the plugin's runaway rule (psc::bullet::runawayContacts: bodies
+  /// inside each other or too fast for the contact radius), and the first such warning.
   std::size_t runaway_steps = 0;
   std::string runaway_warning;
   /// Vertices that passed through another body's triangle during a step without a soft-soft contact

@@ -56,6 +56,7 @@ struct StepCounts {
   std::size_t truth_pairs = 0, truth_pairs_found = 0;    ///< body pairs in contact, of them with a contact found
   std::size_t truth_ambiguous = 0;                       ///< truth contacts in the rounding band
   std::size_t truth_strict_untestable = 0;               ///< strict truth on triangles CollideVF_SS refuses
+  std::size_t found_in_strict_untestable = 0;            ///< found contacts of those (Robust, Continuous)
   // After the step.
   std::size_t penetrating_vertices = 0;                  ///< inside another closed body beyond the margins
   std::size_t runaway_pairs = 0;                         ///< body pairs over the runaway rule (runner.cpp)

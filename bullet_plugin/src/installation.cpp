@@ -76,6 +76,19 @@ psc::SensorSettings coreSettings(const Settings& settings) {
 
 }  // namespace
 
+double runawayContacts(const btSoftBody& a, const btSoftBody& b) {
+  const auto meanRestArea = [](const btSoftBody& body) {
+    double area = 0.0;
+    for (int f = 0; f < body.m_faces.size(); ++f) area += double(body.m_faces[f].m_ra);
+    return body.m_faces.size() > 0 ? area / body.m_faces.size() : 0.0;
+  };
+  const double margins = double(a.getCollisionShape()->getMargin()) + double(b.getCollisionShape()->getMargin());
+  const double finest = std::min(meanRestArea(a), meanRestArea(b));
+  const double kPi = 3.14159265358979323846;
+  const double per_node = finest > 0.0 ? std::max(1.0, kPi * margins * margins / finest) : 1.0;
+  return double(kRunawayContactsPerNode) * per_node * double(std::min(a.m_nodes.size(), b.m_nodes.size()));
+}
+
 Installation::Installation(btSoftRigidDynamicsWorld& world, const Settings& settings)
     : world_(world), dispatcher_(collisionDispatcherOf(world)), settings_(settings), sensors_(coreSettings(settings)) {
   if (settings.exact != ExactTest::Bullet && settings.exact != ExactTest::Robust &&
@@ -157,16 +170,16 @@ void Installation::collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, p
     stats_.crossing_contacts += counts.crossings;
   }
   const std::size_t contacts = ab_counts.contacts + ba_counts.contacts;
+  // The face areas are only read for the rare pair with over 16 contacts per node.
   const std::size_t nodes = static_cast<std::size_t>(std::min(a.m_nodes.size(), b.m_nodes.size()));
-  if (contacts > kRunawayContactsPerNode * nodes) {
+  if (contacts > kRunawayContactsPerNode * nodes && double(contacts) > runawayContacts(a, b)) {
     if (++stats_.runaway_pairs == 1) {
       const btSoftBody::tSoftBodyArray& all = world_.getSoftBodyArray();
       stats_.runaway = "psc::bullet: runaway contact between soft bodies " +
                        std::to_string(all.findLinearSearch(&a)) + " and " + std::to_string(all.findLinearSearch(&b)) +
-                       " of the world: " + std::to_string(contacts) + " contacts in one step for " +
-                       std::to_string(nodes) + " nodes of the smaller body (over " +
-                       std::to_string(kRunawayContactsPerNode) +
-                       " per node); they are inside each other or faster than the contact radius follows";
+                       " of the world: " + std::to_string(contacts) + " contacts in one step, over " +
+                       std::to_string(static_cast<std::size_t>(runawayContacts(a, b))) +
+                       "; they are inside each other or faster than the contact radius follows";
     }
   }
   ++stats_.body_pairs;

@@ -132,19 +132,18 @@ TEST(Stats, SensorsStepEvenWhenNoSoftPairIsDispatched) {
 
 }  // namespace
 
-// Two spheres in the same place: every node lies within the margins of many faces of the other
-// body, far beyond resting contact; the step reports the pair as a runaway, naming both bodies.
-// Three spheres in a row at rest in contact do not.
+// A sphere moving 1 unit per step into another: Bullet's radius margins + 2·|Δx| reaches nearly
+// every face of the other sphere from each moving node, far beyond resting contact; the step
+// reports the pair as a runaway, naming both bodies. Three spheres in a row at rest in contact do not.
 TEST(Stats, RunawayPairsAreReportedWithTheBodiesAndTheContactCount) {
   psc_test::SoftWorld w(0);
-  psc_test::SoftParams params;
-  params.margin = 0.25;
-  w.addSoft(psc::makeSphere(1.0, 300), params);
-  w.addSoft(psc::makeSphere(1.0, 300).translate({0.01, 0, 0}), params);
+  w.addSoft(psc::makeSphere(1.0, 300));
+  w.addSoft(psc::makeSphere(1.0, 300).translate({2.5, 0, 0}), {}, {-60, 0, 0});
   auto plugin = psc::bullet::install(w.world);
   w.run(1);
   const psc::bullet::Stats& s = plugin.stats();
-  EXPECT_GT(s.contacts, psc::bullet::kRunawayContactsPerNode * 300);
+  const auto& bodies = w.world.getSoftBodyArray();
+  EXPECT_GT(double(s.contacts), psc::bullet::runawayContacts(*bodies[0], *bodies[1]));
   EXPECT_EQ(s.runaway_pairs, 1u);
   EXPECT_NE(s.runaway.find("soft bodies 0 and 1"), std::string::npos) << s.runaway;
   EXPECT_NE(s.runaway.find(std::to_string(s.contacts) + " contacts"), std::string::npos) << s.runaway;

@@ -4,6 +4,8 @@
 #include "psc/bullet/precision.h"
 #include "psc/world.h"
 
+#include <BulletSoftBody/btSoftBody.h>
+
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -13,9 +15,14 @@ namespace psc::bullet {
 /// Counters of the most recent simulation step in which Bullet dispatched at least one soft-soft
 /// pair (the sensors are stepped lazily at the first such pair; see Plugin). Complete once
 /// btSoftRigidDynamicsWorld::stepSimulation() has returned.
-/// Resting contact gives a few contacts per node (measured over the demo's scenes at 600 vertices
-/// per body: up to ~6 per node of the smaller body); runaways give tens to hundreds.
+/// The runaway rule (Stats::runaway_pairs): a soft body pair is running away when its soft-soft
+/// contacts in one step exceed kRunawayContactsPerNode × (the contacts one node resting on the
+/// finer of the two surfaces has: π·(margin_A + margin_B)² over its mean rest face area, at
+/// least 1) × the node count of the smaller body. Resting contact measured at most ~6 contacts per
+/// node over the demo's scenes; runaways reach hundreds per node.
 inline constexpr std::size_t kRunawayContactsPerNode = 16;
+/// The contact count above which the pair (a, b) is running away (rule above).
+double runawayContacts(const btSoftBody& a, const btSoftBody& b);
 
 struct Stats {
   std::uint64_t sensor_steps = 0;     ///< sensor steps since install()
@@ -34,8 +41,8 @@ struct Stats {
   std::size_t contacts = 0;           ///< btSoftBody::SContacts produced
   std::size_t robust_contacts = 0;    ///< of contacts: made where Bullet's test refuses (Settings::exact Robust/Continuous)
   std::size_t crossing_contacts = 0;  ///< of contacts: nodes that passed through a face this step (Continuous)
-  /// Body pairs with more than kRunawayContactsPerNode contacts per node of the smaller body this
-  /// step: the bodies are deep inside each other or faster than the contact radius can follow,
+  /// Body pairs over the runaway rule (runawayContacts) this step: the bodies are deep inside each
+  /// other or faster than the contact radius can follow,
   /// and Bullet's contact response is feeding on itself (each contact pushes its node out to
   /// margin + 2·|Δx|). Contact counts of such pairs grow without bound over the following steps.
   std::size_t runaway_pairs = 0;
