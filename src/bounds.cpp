@@ -516,9 +516,8 @@ class Collector {
 
 }  // namespace
 
-void cullAndCollect(const std::vector<Body*>& bodies, const CullParams& params, std::vector<FlaggedPair>& flagged,
-                    std::vector<CandidatePair>& candidates, StepStats& counters) {
-  // Body pairs by sort and sweep along the axis where the bodies' centres spread most.
+std::vector<std::pair<Index, Index>> overlappingBodies(const std::vector<Body*>& bodies, const CullParams& params) {
+  // Sort and sweep along the axis where the bodies' centres spread most.
   Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
   for (const Body* b : bodies) {
     const Vec3 c = 0.5 * (b->body_box.lo + b->body_box.hi);
@@ -540,6 +539,25 @@ void cullAndCollect(const std::vector<Body*>& bodies, const CullParams& params, 
       if (overlap(boxes[x], boxes[y])) pairs.emplace_back(std::min(x, y), std::max(x, y));
     }
   std::sort(pairs.begin(), pairs.end());  // the result does not depend on the sweep axis
+  return pairs;
+}
+
+std::vector<std::vector<char>> regionsNearOtherBodies(const std::vector<Body*>& bodies, const CullParams& params) {
+  std::vector<std::vector<char>> near(bodies.size());
+  for (std::size_t i = 0; i < bodies.size(); ++i) near[i].assign(bodies[i]->regionCount(), 0);
+  for (const auto& [i, j] : overlappingBodies(bodies, params))
+    for (const auto& [x, y] : {std::pair<Index, Index>{i, j}, std::pair<Index, Index>{j, i}}) {
+      const Body& X = *bodies[x];
+      const Grown other = grown(bodies[y]->body_box, bodies[y]->margin, params.motion_factor);
+      for (Index r = 0; r < X.regionCount(); ++r)
+        if (overlap(grown(X.region_box[r], X.margin, params.motion_factor), other)) near[x][r] = 1;
+    }
+  return near;
+}
+
+void cullAndCollect(const std::vector<Body*>& bodies, const CullParams& params, std::vector<FlaggedPair>& flagged,
+                    std::vector<CandidatePair>& candidates, StepStats& counters) {
+  const std::vector<std::pair<Index, Index>> pairs = overlappingBodies(bodies, params);
   Collector collect(params, flagged, counters);
   for (const auto& [i, j] : pairs) collect.bodyPair(*bodies[i], *bodies[j]);
 

@@ -31,6 +31,13 @@ struct CullParams {
   bool use_sensors = true;     ///< false: Flagging::Bounds (the ablation)
 };
 
+/// The pairs (i < j) of `bodies` whose grown body boxes overlap, by sort-and-sweep, sorted.
+std::vector<std::pair<Index, Index>> overlappingBodies(const std::vector<Body*>& bodies, const CullParams& params);
+
+/// For each body, whether each of its regions' grown boxes reaches the grown box of another body
+/// it overlaps: the regions whose particles can take part in a sensor decision this step.
+std::vector<std::vector<char>> regionsNearOtherBodies(const std::vector<Body*>& bodies, const CullParams& params);
+
 /// Flags the region pairs of different bodies that reach the candidate stage and appends the
 /// candidate pairs, grouped and sorted by (vertex_body, triangle_body). `bodies` ascending by id.
 /// Adds to the cull's counters in `stats` (body_pairs … candidate_probes) and to ms_candidates

@@ -39,6 +39,8 @@ struct SensorWorld::Impl {
   detail::Particles particles;
   std::vector<Index> p_dest;
   std::vector<Index> p_left;  // vertex each particle left last round (no_backtrack)
+  std::vector<char> p_dirty;  // its pull may have changed since it last stayed put
+  std::vector<std::pair<Index, Vec3>> p_moved;  // particles moved last round, and where from
   std::vector<Index> near;
   PointHashGrid grid;
   detail::ThesisScratch thesis;
@@ -166,14 +168,30 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
 
   p_dest.resize(n);
   p_left.assign(n, kInvalidIndex);
+  p_dirty.assign(n, 1);
+  p_moved.clear();
   for (int round = 0; round < settings.max_rounds; ++round) {
     grid.build(particles.pos, reach);
+    // A particle that stayed put last round decides the same again unless a particle within its
+    // reach moved (from or to a place within reach): only those are evaluated again. Exact.
+    if (round > 0) {
+      std::fill(p_dirty.begin(), p_dirty.end(), 0);
+      for (const auto& [j, from] : p_moved) {
+        p_dirty[j] = 1;
+        for (const Vec3& at : {from, particles.pos[j]})
+          grid.forEachCandidate(at, [&](Index k) {
+            if ((particles.pos[k] - at).squaredNorm() < reach2) p_dirty[k] = 1;
+          });
+      }
+      p_moved.clear();
+    }
     std::size_t moved = 0;
     for (std::size_t i = 0; i < n; ++i) {
       Body& b = *particles.body[i];
       const Index region = particles.region[i];
       const Index cur = b.particle_vertex[region];
       p_dest[i] = cur;
+      if (!p_dirty[i]) continue;
       near.clear();
       grid.forEachCandidate(particles.pos[i], [&](Index j) {
         if (particles.body[j] != &b && (particles.pos[j] - particles.pos[i]).squaredNorm() < reach2) near.push_back(j);
@@ -209,7 +227,9 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
       // Two particles approaching head-on along parallel paths pass each other and, under pure
       // Jacobi updates, swap back forever (seen on interlocking U shapes): with no_backtrack a
       // particle never returns to the vertex it just left within one step.
-      if (settings.no_backtrack && p_dest[i] != at) p_left[i] = at;
+      if (p_dest[i] == at) continue;
+      p_moved.emplace_back(static_cast<Index>(i), particles.pos[i]);
+      if (settings.no_backtrack) p_left[i] = at;
       at = p_dest[i];
       particles.pos[i] = particles.body[i]->positions[p_dest[i]];
     }
@@ -353,11 +373,22 @@ const StepResult& SensorWorld::step() {
   for (auto& kv : w.bodies) w.refitAndCheck(*kv.second, st);
 
   st.bodies = w.bodies.size();
+  std::vector<Body*> ordered;
+  for (auto& kv : w.bodies) ordered.push_back(kv.second.get());
+  detail::CullParams params;
+  params.swept = w.settings.motion_bound == MotionBound::Swept;
+  params.motion_factor = params.swept ? 0.0 : w.settings.motion_factor;
+  params.use_sensors = w.settings.flagging == Flagging::SensorsAndBounds;
+  // [beyond] In the default mode a particle only serves the sensor decision of its region's pairs,
+  // which exist only where the region's box reaches another body's: the other particles stay put.
+  const std::vector<std::vector<char>> near =
+      params.use_sensors ? detail::regionsNearOtherBodies(ordered, params) : std::vector<std::vector<char>>{};
   detail::Particles& ps = w.particles;
   ps.clear();
-  for (auto& kv : w.bodies) {
-    Body& b = *kv.second;
-    for (Index r = 0; r < b.regionCount(); ++r) ps.add(&b, r, b.positions[b.particle_vertex[r]]);
+  for (std::size_t i = 0; i < ordered.size(); ++i) {
+    Body& b = *ordered[i];
+    for (Index r = 0; r < b.regionCount(); ++r)
+      if (near.empty() || near[i][r]) ps.add(&b, r, b.positions[b.particle_vertex[r]]);
   }
   st.particles = ps.size();
   if (st.particles == 0) {
@@ -387,12 +418,6 @@ const StepResult& SensorWorld::step() {
       st.ms_candidates = msSince(t);
     }
   } else {
-    std::vector<Body*> ordered;
-    for (auto& kv : w.bodies) ordered.push_back(kv.second.get());
-    detail::CullParams params;
-    params.swept = w.settings.motion_bound == MotionBound::Swept;
-    params.motion_factor = params.swept ? 0.0 : w.settings.motion_factor;
-    params.use_sensors = w.settings.flagging == Flagging::SensorsAndBounds;
     detail::cullAndCollect(ordered, params, res.flagged, res.candidates, st);
     std::sort(res.flagged.begin(), res.flagged.end(), detail::flaggedLess);
     st.ms_flagging = msSince(t) - st.ms_candidates;
