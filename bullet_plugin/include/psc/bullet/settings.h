@@ -31,9 +31,12 @@ enum class ExactTest {
   /// arithmetic skipped the face or an edge as too small, the exact closest point computed in
   /// double with relative thresholds, so no contact depends on the unit of length.
   Robust,
-  /// Robust, plus a continuous test over the step (m_q → m_x, linear motion of the node and of
-  /// the face's nodes): a node that passes through the face during the step gets a contact that
-  /// pushes it back to the side it came from (instead of Bullet's, whose normal points through).
+  /// Robust within the margins alone (no motion term), plus a continuous test over the step
+  /// (m_q → m_x, linear motion of the node and of the face's nodes): a node that passes through
+  /// the face during the step gets a contact that pushes it back to the side it came from (instead
+  /// of Bullet's, whose normal points through). Its discrete contacts against the same body keep
+  /// their weights but take their face's normal towards the side the node started on, so the
+  /// faces next to the crossed one (a dent under an impact) hold it too (exact.h).
   Continuous,
 };
 
