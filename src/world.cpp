@@ -39,7 +39,8 @@ struct SensorWorld::Impl {
   detail::Particles particles;
   std::vector<Index> p_dest;
   std::vector<Index> p_left;  // vertex each particle left last round (no_backtrack)
-  std::vector<char> p_dirty;  // its pull may have changed since it last stayed put
+  std::vector<char> p_dirty;    // its pull may have changed since it last stayed put
+  std::vector<char> p_movable;  // it may move this step (see step())
   std::vector<std::pair<Index, Vec3>> p_moved;  // particles moved last round, and where from
   std::vector<Index> near;
   PointHashGrid grid;
@@ -191,7 +192,7 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
       const Index region = particles.region[i];
       const Index cur = b.particle_vertex[region];
       p_dest[i] = cur;
-      if (!p_dirty[i]) continue;
+      if (!p_dirty[i] || !p_movable[i]) continue;
       near.clear();
       grid.forEachCandidate(particles.pos[i], [&](Index j) {
         if (particles.body[j] != &b && (particles.pos[j] - particles.pos[i]).squaredNorm() < reach2) near.push_back(j);
@@ -380,15 +381,19 @@ const StepResult& SensorWorld::step() {
   params.motion_factor = params.swept ? 0.0 : w.settings.motion_factor;
   params.use_sensors = w.settings.flagging == Flagging::SensorsAndBounds;
   // [beyond] In the default mode a particle only serves the sensor decision of its region's pairs,
-  // which exist only where the region's box reaches another body's: the other particles stay put.
+  // which exist only where the region's box reaches another body's: the other particles stay put
+  // (and still pull).
   const std::vector<std::vector<char>> near =
       params.use_sensors ? detail::regionsNearOtherBodies(ordered, params) : std::vector<std::vector<char>>{};
   detail::Particles& ps = w.particles;
   ps.clear();
+  w.p_movable.clear();
   for (std::size_t i = 0; i < ordered.size(); ++i) {
     Body& b = *ordered[i];
-    for (Index r = 0; r < b.regionCount(); ++r)
-      if (near.empty() || near[i][r]) ps.add(&b, r, b.positions[b.particle_vertex[r]]);
+    for (Index r = 0; r < b.regionCount(); ++r) {
+      ps.add(&b, r, b.positions[b.particle_vertex[r]]);
+      w.p_movable.push_back(near.empty() || near[i][r]);
+    }
   }
   st.particles = ps.size();
   if (st.particles == 0) {

@@ -281,17 +281,28 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
     }
   }
   if (!crossed.empty()) {
-    // A node that passed through a face of this body keeps only its crossing contacts against the
-    // body: its discrete ones were decided from behind the surface and would push it further in.
+    // A node that passed through a face of this body keeps its discrete contacts against the body,
+    // but with the face's normal turned to the side the node started on: their closest-point
+    // normals were decided from behind the surface and would push it further in. Dropping them
+    // instead leaves the node guarded by the crossed face's plane alone, and where the surface is
+    // folded (a dent under an impact) the solver then moves it through a neighbouring face.
+    // Degenerate faces (no normal) lose the contact.
     std::sort(crossed.begin(), crossed.end());
     int out = before;
     for (int i = before; i < node_body.m_scontacts.size(); ++i) {
-      const btSoftBody::SContact& sc = node_body.m_scontacts[i];
-      const bool keep = is_crossing[static_cast<std::size_t>(i - before)] ||
-                        !std::binary_search(crossed.begin(), crossed.end(), sc.m_node);
-      if (!keep) {
-        ++counts.dropped;
-        continue;
+      btSoftBody::SContact& sc = node_body.m_scontacts[i];
+      if (!is_crossing[static_cast<std::size_t>(i - before)] &&
+          std::binary_search(crossed.begin(), crossed.end(), sc.m_node)) {
+        const btSoftBody::Face& f = *sc.m_face;
+        Vec3 n = faceNormal(toVec(f.m_n[0]->m_x), toVec(f.m_n[1]->m_x), toVec(f.m_n[2]->m_x));
+        if (n == Vec3::Zero()) {
+          ++counts.dropped;
+          continue;
+        }
+        const std::array<double, 3> w{double(sc.m_weights.x()), double(sc.m_weights.y()), double(sc.m_weights.z())};
+        if (n.dot(toVec(sc.m_node->m_q) - facePoint(f, w, true)) < 0.0) n = -n;
+        sc.m_normal = toBt(n);
+        ++counts.turned;
       }
       if (out != i) node_body.m_scontacts[out] = sc;
       ++out;

@@ -448,6 +448,59 @@ TEST(ExactTests, ContinuousPushesANodeThatPassedThroughBackToItsSide) {
   EXPECT_EQ(rig.run(ExactTest::Continuous, continuous), ContactKind::None);
 }
 
+TEST(ExactTests, ContinuousTurnsTheDiscreteContactsOfACrossingNodeToItsSide) {
+  // A folded surface (a dent): face 0 in the plane z = 0, face 1 rising from their shared edge
+  // x = 0 towards −x. A node falls through face 0 and ends 0.27 from face 1 (within the margins),
+  // nearest the shared edge, so face 1's closest-point normal points down, through the surface.
+  btSoftBodyWorldInfo info;
+  btSoftBody node_body{&info, 1, nullptr, nullptr};
+  btSoftBody face_body{&info, 4, nullptr, nullptr};
+  face_body.appendFace(0, 1, 2);
+  face_body.appendFace(0, 3, 1);
+  const btVector3 pos[] = {{0, 0, 0}, {0, 1, 0}, {1, 0.5, 0}, {-1, 0.5, 0.5}};
+  for (int i = 0; i < 4; ++i) {
+    face_body.m_nodes[i].m_x = face_body.m_nodes[i].m_q = pos[i];
+    face_body.m_nodes[i].m_im = 1;
+  }
+  node_body.m_nodes[0].m_q = btVector3(btScalar(0.25), btScalar(0.4), btScalar(0.1));
+  node_body.m_nodes[0].m_x = btVector3(btScalar(0.25), btScalar(0.4), btScalar(-0.1));
+  node_body.m_nodes[0].m_im = 1;
+  node_body.getCollisionShape()->setMargin(btScalar(0.2));
+  face_body.getCollisionShape()->setMargin(btScalar(0.2));
+  const psc::CandidatePair candidates[] = {{0, 0, 1, 0}, {0, 0, 1, 1}};
+  // Each pair alone: a crossing of face 0; a discrete contact on face 1 whose normal points down.
+  btSoftBody::SContact c0{}, c1{};
+  ASSERT_EQ(psc::bullet::exactContact(ExactTest::Continuous, node_body, node_body.m_nodes[0], face_body,
+                                      face_body.m_faces[0], c0),
+            ContactKind::Crossing);
+  ASSERT_NE(psc::bullet::exactContact(ExactTest::Continuous, node_body, node_body.m_nodes[0], face_body,
+                                      face_body.m_faces[1], c1),
+            ContactKind::None);
+  EXPECT_LT(double(c1.m_normal.z()), 0.0);
+  // Together: the crossing contact, and face 1's contact with its face normal on the node's side.
+  const psc::bullet::ExactCounts n =
+      psc::bullet::collideCandidates(ExactTest::Continuous, node_body, face_body, candidates, candidates + 2);
+  EXPECT_EQ(n.tests, 2u);
+  EXPECT_EQ(n.crossings, 1u);
+  EXPECT_EQ(n.turned, 1u);
+  EXPECT_EQ(n.dropped, 0u);
+  ASSERT_EQ(n.contacts, 2u);
+  ASSERT_EQ(node_body.m_scontacts.size(), 2);
+  const btSoftBody::SContact& crossing = node_body.m_scontacts[0];
+  const btSoftBody::SContact& turned = node_body.m_scontacts[1];
+  EXPECT_EQ(crossing.m_face, &face_body.m_faces[0]);
+  EXPECT_NEAR(double(crossing.m_normal.z()), 1.0, 1e-6);
+  EXPECT_EQ(turned.m_face, &face_body.m_faces[1]);
+  const Vec3 up = Vec3(0.5, 0.0, 1.0).normalized();  // face 1's normal, towards the node's start
+  EXPECT_NEAR(double(turned.m_normal.x()), up.x(), 1e-6);
+  EXPECT_NEAR(double(turned.m_normal.y()), up.y(), 1e-6);
+  EXPECT_NEAR(double(turned.m_normal.z()), up.z(), 1e-6);
+  // Everything else is the discrete contact's.
+  btSoftBody::SContact expected = c1;
+  expected.m_normal = turned.m_normal;
+  EXPECT_TRUE(psc_test::sameContact(expected, turned));
+}
+
 // --- the plugin ---------------------------------------------------------------------------------
 
 TEST(ExactTests, SettingsExactIsValidatedAndNamed) {

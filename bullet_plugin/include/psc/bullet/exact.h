@@ -45,14 +45,19 @@ struct ExactCounts {
   std::size_t contacts = 0;   ///< SContacts appended
   std::size_t robust = 0;     ///< of them: ContactKind::Robust (pairs Bullet's test refuses or has no normal for)
   std::size_t crossings = 0;  ///< of them: ContactKind::Crossing
-  std::size_t dropped = 0;    ///< Continuous: discrete contacts of nodes that crossed a face of the same body
+  std::size_t turned = 0;     ///< Continuous: discrete contacts of nodes that crossed a face of the same body, given the face's normal
+  std::size_t dropped = 0;    ///< Continuous: such contacts on degenerate faces (no normal), removed
 };
 
 /// The plugin's exact stage for one direction of one body pair: runs `test` on each candidate
 /// (node `vertex` of node_body, face `triangle` of face_body) in [first, last) and appends the
 /// contacts to node_body.m_scontacts, in candidate order. Bullet runs btSoftColliders::CollideVF_SS
-/// itself. Continuous then drops the discrete contacts of every node that got a crossing contact
-/// here (they were decided from behind the surface and would push it further through).
+/// itself. Continuous then turns the discrete contacts of every node that got a crossing contact
+/// here to their face's normal on the side the node started from (the side at m_q, at the
+/// contact's weights): decided from behind the surface, their closest-point normals would push it
+/// further through; kept, they hold it in front of the faces next to the crossed one, which the
+/// solver otherwise moves it through where the surface is folded. Contacts on degenerate faces
+/// (no normal) are dropped.
 /// The candidates' indices must be valid for the bodies' m_nodes / m_faces.
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body,
                               const psc::CandidatePair* first, const psc::CandidatePair* last);

@@ -35,9 +35,11 @@ enum class ExactTest {
   /// margins), plus a continuous test over the step (m_q → m_x, linear motion of the node and of
   /// the face's nodes): a node that passes through the face during the step gets a contact that
   /// pushes it back to the side it came from (instead of Bullet's, whose normal points through).
-  /// The crossing test does what Bullet's motion term stands in for, without its contacts that
-  /// throw fast nodes back at twice their speed. The plugin runs the core with
-  /// MotionBound::Swept for it: far fewer candidates than Bullet's radius on fast bodies.
+  /// Its discrete contacts against the same body keep their weights but take their face's normal
+  /// towards the side the node started on, so the faces next to the crossed one (a dent under an
+  /// impact) hold it too (exact.h). The crossing test does what Bullet's motion term stands in
+  /// for, without its contacts that throw fast nodes back at twice their speed. The plugin runs
+  /// the core with MotionBound::Swept for it: far fewer candidates than Bullet's radius on fast bodies.
   Continuous,
 };
 
