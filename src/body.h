@@ -79,6 +79,9 @@ struct Body {
   std::size_t particle_override = 0;
   bool deformable = true;
   std::shared_ptr<const ConvexParts> parts;
+  /// Self-collision: on when `rest` holds the rest shape (SensorWorld::setSelfCollision).
+  std::vector<Vec3> rest;
+  bool selfCollides() const { return !rest.empty(); }
   MeshReport report;
   std::size_t vertices_in_triangles = 0;
 

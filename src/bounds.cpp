@@ -215,6 +215,49 @@ void sweepBetween(std::vector<SweepItem>& a, std::vector<SweepItem>& b, F&& f) {
   }
 }
 
+/// Sort and sweep within one set: f(a, b) once for every unordered pair (a ≠ b) whose intervals
+/// overlap.
+template <class F>
+void sweepWithin(std::vector<SweepItem>& a, F&& f) {
+  sortItems(a);
+  for (std::size_t i = 0; i < a.size(); ++i)
+    for (std::size_t k = i + 1; k < a.size() && a[k].lo <= a[i].hi; ++k) f(a[i].id, a[k].id);
+}
+
+/// Squared distance from p to the triangle (a, b, c), by the closest point's Voronoi region
+/// (Ericson, Real-Time Collision Detection, 5.1.5). Degenerate triangles give the distance to
+/// their edges' closest point or a vertex, never NaN.
+double pointTriangleDistance2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return ap.squaredNorm();
+  const Vec3 bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return bp.squaredNorm();
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 && d1 - d3 > 0.0) return (p - (a + d1 / (d1 - d3) * ab)).squaredNorm();
+  const Vec3 cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return cp.squaredNorm();
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 && d2 - d6 > 0.0) return (p - (a + d2 / (d2 - d6) * ac)).squaredNorm();
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 && (d4 - d3) + (d5 - d6) > 0.0)
+    return (p - (b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b))).squaredNorm();
+  const double sum = va + vb + vc;
+  if (!(std::abs(sum) > 0.0)) {  // degenerate: the nearest of the three edges
+    const auto seg = [&](const Vec3& x, const Vec3& y) {
+      const Vec3 d = y - x;
+      const double l2 = d.squaredNorm();
+      const double t = l2 > 0.0 ? std::clamp((p - x).dot(d) / l2, 0.0, 1.0) : 0.0;
+      return (p - (x + t * d)).squaredNorm();
+    };
+    return std::min({seg(a, b), seg(b, c), seg(c, a)});
+  }
+  const double v = vb / sum, w = vc / sum;
+  return (p - (a + v * ab + w * ac)).squaredNorm();
+}
+
 /// The sensor axis of one region pair: n from A's particle to B's, and each chunk's extent along
 /// n (its box's support, grown by its reach).
 struct Axis {
@@ -271,7 +314,25 @@ struct PairContext {
   std::vector<std::uint64_t>& out;
   StepStats& counters;
   Scratch& s;
+  double self_exclude2 = -1.0;  ///< vb == tb: squared rest distance below which a pair is excluded
 };
+
+/// Self-collision's exclusion rule: the triangle holds the vertex, or the two were within the
+/// exclusion distance in the body's rest shape.
+/// With MotionBound::Radius the pair must also be within the vertex's radius r now (with a
+/// relative slack for single-precision callers): a surface at rest is all near pairs, and
+/// boxes alone would hand its curved parts to the exact test every step.
+bool excludedSelfPair(const PairContext& ctx, Index v, Index t, double r) {
+  const Triangle& tri = ctx.tb.topology->triangle(t);
+  if (tri[0] == v || tri[1] == v || tri[2] == v) return true;
+  if (!ctx.swept) {
+    const PositionView& x = ctx.tb.positions;
+    const double reach = r * (1.0 + 1e-5);
+    if (!(pointTriangleDistance2(x[v], x[tri[0]], x[tri[1]], x[tri[2]]) < reach * reach)) return true;
+  }
+  const std::vector<Vec3>& rest = ctx.tb.rest;
+  return pointTriangleDistance2(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) < ctx.self_exclude2;
+}
 
 void gatherVertices(const PairContext& ctx, ChunkRef& c) {
   if (c.vertices_at >= 0) return;
@@ -359,7 +420,12 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       const TriangleRec& tr = s.tris[k];
       ++ctx.counters.candidate_probes;
       if (sensors && (vr.xn + vr.r < tr.nlo || vr.xn - vr.r > tr.nhi)) continue;
-      if (inside(vr.x, tr.lo, tr.hi, vr.r)) ctx.out.push_back((std::uint64_t{vr.v} << 32) | tr.t);
+      if (!inside(vr.x, tr.lo, tr.hi, vr.r)) continue;
+      if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, tr.t, vr.r)) {
+        ++ctx.counters.self_excluded_pairs;
+        continue;
+      }
+      ctx.out.push_back((std::uint64_t{vr.v} << 32) | tr.t);
     }
   }
 }
@@ -403,6 +469,78 @@ class Collector {
 
   std::vector<Group> groups;
 
+  /// Self-collision of X: its region pairs (I ≤ J, I = J included) whose grown boxes overlap, by
+  /// sort-and-sweep; in each, its chunk pairs likewise, and the (vertex, triangle) pairs of both
+  /// directions that the boxes cannot rule out and the exclusion rule does not exclude. Every
+  /// ordered (vertex chunk, triangle chunk) pair is visited once, so every pair comes out once.
+  /// No sensor decision: the particles sense other bodies only.
+  void selfBody(const Body& X) {
+    const double mf = params_.motion_factor;
+    std::vector<Grown>& boxes = self_boxes_;
+    boxes.resize(X.regionCount());
+    s_.items_a.clear();
+    const int ax = longestAxis(X.body_box.lo, X.body_box.hi);
+    region_pairs_.clear();
+    for (Index r = 0; r < X.regionCount(); ++r) {
+      boxes[r] = grown(X.region_box[r], X.margin, mf);
+      s_.items_a.push_back({boxes[r].lo[ax], boxes[r].hi[ax], r});
+      region_pairs_.emplace_back(r, r);
+    }
+    sweepWithin(s_.items_a, [&](Index a, Index b) {
+      if (overlap(boxes[a], boxes[b])) region_pairs_.emplace_back(std::min(a, b), std::max(a, b));
+    });
+    std::sort(region_pairs_.begin(), region_pairs_.end());
+    const double exclude = params_.self_rest_exclusion * 2.0 * X.margin;
+    Group g{X.id, X.id, {}};
+    const Axis no_axis;
+    const PairContext ctx{X, X, 2.0 * X.margin, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude};
+    const auto t0 = std::chrono::steady_clock::now();
+    for (const auto& [ri, rj] : region_pairs_) {
+      ++counters_.self_region_pairs;
+      nearChunks(X, ri, boxes[rj], no_axis, s_.near_a);
+      if (s_.near_a.empty()) continue;
+      const bool same = ri == rj;
+      if (!same) {
+        nearChunks(X, rj, boxes[ri], no_axis, s_.near_b);
+        if (s_.near_b.empty()) continue;
+      }
+      std::vector<ChunkRef>& other = same ? s_.near_a : s_.near_b;
+      const int cax = longestAxis(boxes[ri].lo.cwiseMax(boxes[rj].lo), boxes[ri].hi.cwiseMin(boxes[rj].hi));
+      const auto itemsOf = [&](const std::vector<ChunkRef>& refs, std::vector<SweepItem>& items) {
+        items.clear();
+        for (std::size_t k = 0; k < refs.size(); ++k)
+          items.push_back({refs[k].box.lo[cax], refs[k].box.hi[cax], static_cast<Index>(k)});
+      };
+      chunk_pairs_.clear();
+      const auto keep = [&](Index ka, Index kb) {
+        if (overlap(s_.near_a[ka].box, other[kb].box)) chunk_pairs_.emplace_back(ka, kb);
+      };
+      itemsOf(s_.near_a, s_.items_a);
+      if (same) {
+        for (std::size_t k = 0; k < s_.near_a.size(); ++k) chunk_pairs_.emplace_back(k, k);
+        sweepWithin(s_.items_a, [&](Index a, Index b) { keep(std::min(a, b), std::max(a, b)); });
+      } else {
+        itemsOf(s_.near_b, s_.items_b);
+        sweepBetween(s_.items_a, s_.items_b, keep);
+      }
+      std::sort(chunk_pairs_.begin(), chunk_pairs_.end());
+      counters_.chunk_pairs += chunk_pairs_.size();
+      s_.verts.clear();
+      s_.tris.clear();
+      for (const auto& [ka, kb] : chunk_pairs_) {
+        ChunkRef& ca = s_.near_a[ka];
+        ChunkRef& cb = other[kb];
+        chunkCandidates(ctx, ca, cb);
+        if (&ca != &cb) chunkCandidates(ctx, cb, ca);
+      }
+    }
+    counters_.ms_candidates += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    if (!g.keys.empty()) {
+      std::sort(g.keys.begin(), g.keys.end());
+      groups.push_back(std::move(g));
+    }
+  }
+
  private:
   void regionPair(const Body& A, Index ri, const Body& B, Index rj, std::vector<std::uint64_t>& ab_keys,
                   std::vector<std::uint64_t>& ba_keys) {
@@ -424,20 +562,9 @@ class Collector {
       }
     }
     // Only the chunks of I that reach J's box and of J that reach I's box can pair up.
-    const auto nearChunks = [&](const Body& X, Index r, const Grown& other, std::vector<ChunkRef>& out) {
-      out.clear();
-      for (Index c = X.chunks.region_begin[r]; c < X.chunks.region_begin[r + 1]; ++c) {
-        const Grown g = grown(X.chunk_box[c], X.margin, mf);
-        if (!overlap(g, other)) continue;
-        ChunkRef ref{c, 0.0, 0.0, g};
-        if (axis.valid) axis.extent(X.chunk_box[c], ref.lo_n, ref.hi_n);
-        out.push_back(ref);
-      }
-      counters_.chunks_in += out.size();
-    };
-    nearChunks(A, ri, boxJ, s_.near_a);
+    nearChunks(A, ri, boxJ, axis, s_.near_a);
     if (s_.near_a.empty()) return;
-    nearChunks(B, rj, boxI, s_.near_b);
+    nearChunks(B, rj, boxI, axis, s_.near_b);
     if (s_.near_b.empty()) return;
     if (axis.valid && !sensorSlab()) {
       ++counters_.region_pairs_separated;
@@ -484,6 +611,19 @@ class Collector {
     counters_.ms_candidates += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }
 
+  /// The chunks of region r of X whose grown boxes reach `other`, with their extents along `axis`.
+  void nearChunks(const Body& X, Index r, const Grown& other, const Axis& axis, std::vector<ChunkRef>& out) {
+    out.clear();
+    for (Index c = X.chunks.region_begin[r]; c < X.chunks.region_begin[r + 1]; ++c) {
+      const Grown g = grown(X.chunk_box[c], X.margin, params_.motion_factor);
+      if (!overlap(g, other)) continue;
+      ChunkRef ref{c, 0.0, 0.0, g};
+      if (axis.valid) axis.extent(X.chunk_box[c], ref.lo_n, ref.hi_n);
+      out.push_back(ref);
+    }
+    counters_.chunks_in += out.size();
+  }
+
   /// The sensor decision along the axis n (from I's particle towards J's): the highest reach of
   /// I's chunks and the lowest of J's. When I's highest stays below J's lowest the pair is apart
   /// (false); otherwise the chunks that cannot reach across are dropped and the pair goes on.
@@ -512,6 +652,7 @@ class Collector {
   StepStats& counters_;
   Scratch s_;
   std::vector<std::pair<Index, Index>> region_pairs_, chunk_pairs_;
+  std::vector<Grown> self_boxes_;
 };
 
 }  // namespace
@@ -560,6 +701,8 @@ void cullAndCollect(const std::vector<Body*>& bodies, const CullParams& params, 
   const std::vector<std::pair<Index, Index>> pairs = overlappingBodies(bodies, params);
   Collector collect(params, flagged, counters);
   for (const auto& [i, j] : pairs) collect.bodyPair(*bodies[i], *bodies[j]);
+  for (const Body* b : bodies)
+    if (b->selfCollides()) collect.selfBody(*b);
 
   std::vector<Group>& groups = collect.groups;
   std::sort(groups.begin(), groups.end(),

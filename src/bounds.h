@@ -29,6 +29,7 @@ struct CullParams {
   double motion_factor = 2.0;  ///< MotionBound::Radius; 0 with `swept`
   bool swept = false;          ///< MotionBound::Swept
   bool use_sensors = true;     ///< false: Flagging::Bounds (the ablation)
+  double self_rest_exclusion = 2.0;  ///< SensorSettings::self_rest_exclusion
 };
 
 /// The pairs (i < j) of `bodies` whose grown body boxes overlap, by sort-and-sweep, sorted.

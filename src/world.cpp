@@ -256,6 +256,12 @@ namespace {
   throw Error(ErrorCode::InvalidSettings, s.str());
 }
 
+std::vector<Vec3> restShape(const PositionView& positions) {
+  std::vector<Vec3> rest(positions.size());
+  for (std::size_t v = 0; v < rest.size(); ++v) rest[v] = positions[static_cast<Index>(v)];
+  return rest;
+}
+
 // Validates a body description completely and builds its topology; nothing is partitioned yet.
 std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
   auto b = std::make_unique<Body>();
@@ -295,12 +301,22 @@ std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
   b->particle_override = desc.particles;
   b->deformable = desc.deformable;
   b->parts = desc.parts;
+  if (desc.self_collision) b->rest = restShape(desc.positions);
   return b;
 }
 
 }  // namespace
 
+namespace {
+void checkSelfCollisionMode(const SensorSettings& settings, const std::string& label) {
+  if (settings.flagging == Flagging::Sensors)
+    throw Error(ErrorCode::InvalidSettings, label + ": self-collision needs flagging = SensorsAndBounds or Bounds, "
+                                                    "not Sensors (the thesis's flag-only mode)");
+}
+}  // namespace
+
 BodyId SensorWorld::addBody(const BodyDesc& desc) {
+  if (desc.self_collision) checkSelfCollisionMode(impl_->settings, desc.name.empty() ? "addBody" : "body '" + desc.name + "'");
   const BodyId id = impl_->next_id;
   impl_->bodies.emplace(id, makeBody(id, desc));
   ++impl_->next_id;
@@ -342,6 +358,15 @@ void SensorWorld::setMargin(BodyId id, double margin) {
   b.margin = margin;
 }
 
+void SensorWorld::setSelfCollision(BodyId id, bool on) {
+  Body& b = impl_->get(id);
+  if (on) checkSelfCollisionMode(impl_->settings, b.label());
+  if (on) checkFinite(b.positions, b.label());
+  b.rest = on ? restShape(b.positions) : std::vector<Vec3>{};
+}
+
+bool SensorWorld::selfCollision(BodyId id) const { return impl_->get(id).selfCollides(); }
+
 void SensorWorld::replaceMesh(BodyId id, std::vector<Triangle> triangles, const PositionView& positions,
                               const PositionView& previous) {
   Body& old = impl_->get(id);
@@ -352,6 +377,7 @@ void SensorWorld::replaceMesh(BodyId id, std::vector<Triangle> triangles, const 
   desc.margin = old.margin;
   desc.particles = old.particle_override;
   desc.deformable = old.deformable;
+  desc.self_collision = old.selfCollides();  // the new mesh's positions become its rest shape
   desc.name = old.name;
   std::unique_ptr<Body> fresh = makeBody(id, desc);  // the old body stays if this throws
   fresh->repartitions = old.repartitions + 1;
@@ -380,6 +406,7 @@ const StepResult& SensorWorld::step() {
   params.swept = w.settings.motion_bound == MotionBound::Swept;
   params.motion_factor = params.swept ? 0.0 : w.settings.motion_factor;
   params.use_sensors = w.settings.flagging == Flagging::SensorsAndBounds;
+  params.self_rest_exclusion = w.settings.self_rest_exclusion;
   // [beyond] In the default mode a particle only serves the sensor decision of its region's pairs,
   // which exist only where the region's box reaches another body's: the other particles stay put
   // (and still pull).
@@ -427,6 +454,7 @@ const StepResult& SensorWorld::step() {
     std::sort(res.flagged.begin(), res.flagged.end(), detail::flaggedLess);
     st.ms_flagging = msSince(t) - st.ms_candidates;
     st.candidate_pairs = res.candidates.size();
+    for (const CandidatePair& c : res.candidates) st.self_candidate_pairs += c.vertex_body == c.triangle_body;
     if (!w.settings.build_candidates) res.candidates.clear();
   }
   st.flagged_pairs = res.flagged.size();
@@ -492,7 +520,8 @@ std::size_t SensorWorld::memoryBytes(BodyId id) const {
          b.partition.seed_vertex.capacity() * sizeof(Index) +
          b.partition.code_vectors.capacity() * sizeof(b.partition.code_vectors[0]) +
          b.particle_vertex.capacity() * sizeof(Index) + b.chunks.bytes() +
-         (b.chunk_box.capacity() + b.region_box.capacity()) * sizeof(detail::MotionBox);
+         (b.chunk_box.capacity() + b.region_box.capacity()) * sizeof(detail::MotionBox) +
+         b.rest.capacity() * sizeof(Vec3);
 }
 
 const MeshReport& SensorWorld::report(BodyId id) const { return impl_->get(id).report; }

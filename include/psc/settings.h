@@ -72,6 +72,9 @@ struct SensorSettings {
   /// Bullet's CollideVF_SS uses 2. Only used when a body has a previous-position view. ≥ 0.
   double motion_factor = 2.0;
   MotionBound motion_bound = MotionBound::Radius;
+  /// Self-collision: a vertex and a triangle of one body closer than this × (2 × margin) in the
+  /// body's rest shape are never self candidates (SensorWorld::setSelfCollision). ≥ 1.
+  double self_rest_exclusion = 2.0;
   /// [beyond] A body gets at most (vertices in triangles / min_region_vertices) particles from the
   /// budget (at least 1; an explicit BodyDesc::particles is not capped). The thesis's budget counts
   /// parts, not vertices: 8 HACD parts × 12 give a 500-vertex torus ~100 regions of 5 vertices.

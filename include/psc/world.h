@@ -27,6 +27,8 @@ struct BodyDesc {
   double margin = 0.0;            ///< collision margin of this body, length units (≥ 0)
   std::size_t particles = 0;      ///< > 0: override the particle budget
   bool deformable = true;         ///< false: a rigid mesh, never checked for repartitioning
+  /// Also hand over (vertex, triangle) pairs of this body with itself (SensorWorld::setSelfCollision).
+  bool self_collision = false;
   /// Optional convex parts (e.g. shared by copies of one mesh); computed with HACD when empty.
   std::shared_ptr<const ConvexParts> parts;
   std::string name;               ///< used in error messages and reports
@@ -53,7 +55,8 @@ struct FlaggedPair {
   }
 };
 
-/// A (vertex of one body, triangle of another) pair to hand to the exact test. Each appears at
+/// A (vertex of one body, triangle of another) pair to hand to the exact test, or of one body with
+/// itself (vertex_body == triangle_body) when that body has self-collision on. Each appears at
 /// most once per step. StepResult::candidates is sorted by (vertex_body, triangle_body); the order
 /// inside one such group is deterministic but otherwise unspecified.
 struct CandidatePair {
@@ -98,6 +101,9 @@ struct StepStats {
   std::size_t candidate_triangles = 0;     ///< triangles examined (likewise)
   std::size_t candidate_probes = 0;        ///< (vertex, triangle) box tests made to find them
   std::size_t candidate_pairs = 0;         ///< unique pairs handed to the exact test
+  std::size_t self_region_pairs = 0;       ///< region pairs of one body (self-collision) whose grown boxes overlap
+  std::size_t self_candidate_pairs = 0;    ///< of candidate_pairs: a body with itself
+  std::size_t self_excluded_pairs = 0;     ///< self pairs the boxes kept but the rule drops (incident, close at rest, or out of reach)
   std::size_t repartitions = 0;            ///< bodies re-partitioned this step
   double r_eff = 0.0;                      ///< R_eff used this step (length units)
   double ms_sensors = 0.0;                 ///< particle movement (wall clock)
@@ -134,6 +140,13 @@ class SensorWorld {
   /// New views after the owner moved its memory (same vertex count; else psc::Error).
   void setPositions(BodyId id, const PositionView& positions, const PositionView& previous = {});
   void setMargin(BodyId id, double margin);
+  /// Self-collision of one body: its vertices against its own triangles. A pair is never a
+  /// candidate when the triangle holds the vertex, or when the two were closer than
+  /// self_rest_exclusion × (2 × margin) in the body's rest shape, i.e. its positions when
+  /// self-collision was switched on (or the body added with it): what touches at rest is the
+  /// surface itself, not a fold. Switching it on again takes the current positions as rest shape.
+  void setSelfCollision(BodyId id, bool on);
+  bool selfCollision(BodyId id) const;
   /// The mesh itself changed (vertex count, triangles): rebuilds the topology and repartitions.
   void replaceMesh(BodyId id, std::vector<Triangle> triangles, const PositionView& positions,
                    const PositionView& previous = {});

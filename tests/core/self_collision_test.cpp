@@ -1,0 +1,194 @@
+// Self-collision in the core (SensorWorld::setSelfCollision): a body's own (vertex, triangle)
+// pairs within the contact radius 2 × margin come out, except those the exclusion rule names
+// (the triangle holds the vertex, or the two were within self_rest_exclusion × 2 × margin in the
+// rest shape). Checked against brute force over every pair of the body.
+#include "psc/error.h"
+#include "psc/shapes.h"
+#include "psc/world.h"
+#include "reference.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+#include <string>
+#include <tuple>
+#include <vector>
+
+namespace {
+
+using namespace psc;
+
+constexpr double kPi = 3.14159265358979323846;
+
+/// A patch in the xy plane (centred on the origin) folded over a cylinder of radius rho around the line
+/// x = fold, z = rho: the part beyond the fold lies above the part before it, 2·rho apart.
+std::vector<Vec3> folded(const std::vector<Vec3>& flat, double fold, double rho) {
+  std::vector<Vec3> out = flat;
+  for (Vec3& p : out) {
+    const double s = p.x() - fold;
+    if (s <= 0.0) continue;
+    if (s <= kPi * rho) {
+      p = Vec3(fold + rho * std::sin(s / rho), p.y(), rho * (1.0 - std::cos(s / rho)));
+    } else {
+      p = Vec3(fold - (s - kPi * rho), p.y(), 2.0 * rho);
+    }
+  }
+  return out;
+}
+
+struct Reference {
+  std::size_t within = 0;    // pairs within the radius, not excluded
+  std::size_t excluded = 0;  // pairs within the radius that the rule excludes
+  std::set<std::pair<Index, Index>> pairs;
+};
+
+Reference bruteForce(const TriMesh& mesh, const std::vector<Vec3>& rest, double margin, double exclusion) {
+  Reference r;
+  for (Index v = 0; v < mesh.vertices.size(); ++v)
+    for (Index t = 0; t < mesh.triangles.size(); ++t) {
+      const Triangle& tri = mesh.triangles[t];
+      const Vec3& x = mesh.vertices[v];
+      if (!(test::pointTriangleDistance(x, mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]]) <
+            2.0 * margin))
+        continue;
+      const bool incident = tri[0] == v || tri[1] == v || tri[2] == v;
+      if (incident || test::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) <
+                          exclusion * 2.0 * margin) {
+        ++r.excluded;
+        continue;
+      }
+      ++r.within;
+      r.pairs.insert({v, t});
+    }
+  return r;
+}
+
+std::set<std::pair<Index, Index>> selfCandidates(const StepResult& res, BodyId id, std::size_t& duplicates) {
+  std::set<std::pair<Index, Index>> out;
+  duplicates = 0;
+  for (const CandidatePair& c : res.candidates)
+    if (c.vertex_body == id && c.triangle_body == id && !out.insert({c.vertex, c.triangle}).second) ++duplicates;
+  return out;
+}
+
+TEST(SelfCollision, FlatClothHasNoSelfCandidatesFoldedClothHasEveryPairOfItsLayers) {
+  TriMesh cloth = makePatch(2.0, 1.0, 41, 21);
+  const std::vector<Vec3> rest = cloth.vertices;
+  const double margin = 0.02;
+  BodyDesc d;
+  d.triangles = cloth.triangles;
+  d.positions = PositionView::of(cloth.vertices);
+  d.margin = margin;
+  d.self_collision = true;
+  d.name = "cloth";
+  SensorWorld w;
+  const BodyId id = w.addBody(d);
+  EXPECT_TRUE(w.selfCollision(id));
+
+  // Lying flat: neighbours are within the radius, but all of them are excluded.
+  const StepResult& flat = w.step();
+  std::size_t dup = 0;
+  EXPECT_TRUE(selfCandidates(flat, id, dup).empty());
+  EXPECT_EQ(flat.stats.self_candidate_pairs, 0u);
+  EXPECT_GT(flat.stats.self_excluded_pairs, 0u) << "the flat cloth's neighbours are within reach";
+
+  // Folded in two, the layers 0.03 apart (inside 2 × margin = 0.04): every pair the brute force
+  // finds between the layers is a candidate, exactly once, and nothing excluded comes out.
+  cloth.vertices = folded(rest, 0.0, 0.015);
+  w.setPositions(id, PositionView::of(cloth.vertices));
+  const StepResult& fold = w.step();
+  const Reference ref = bruteForce(cloth, rest, margin, w.settings().self_rest_exclusion);
+  const std::set<std::pair<Index, Index>> got = selfCandidates(fold, id, dup);
+  EXPECT_EQ(dup, 0u);
+  EXPECT_GT(ref.within, 500u) << "the layers must touch";
+  std::size_t missed = 0;
+  for (const auto& p : ref.pairs) missed += got.count(p) == 0;
+  EXPECT_EQ(missed, 0u) << "of " << ref.within;
+  for (const auto& [v, t] : got) {
+    const Triangle& tri = cloth.triangles[t];
+    ASSERT_FALSE(tri[0] == v || tri[1] == v || tri[2] == v) << "vertex " << v << " in its own triangle " << t;
+    ASSERT_GE(test::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]),
+              w.settings().self_rest_exclusion * 2.0 * margin * (1.0 - 1e-9))
+        << "excluded pair " << v << ", " << t;
+  }
+  EXPECT_EQ(fold.stats.self_candidate_pairs, got.size());
+
+  // Off again: no self pairs.
+  w.setSelfCollision(id, false);
+  EXPECT_FALSE(w.selfCollision(id));
+  EXPECT_TRUE(selfCandidates(w.step(), id, dup).empty());
+}
+
+TEST(SelfCollision, ARoundBallCannotTouchItself) {
+  TriMesh ball = makeSphere(1.0, 800);
+  BodyDesc d;
+  d.triangles = ball.triangles;
+  d.positions = PositionView::of(ball.vertices);
+  d.margin = 0.02;
+  d.self_collision = true;
+  SensorWorld w;
+  const BodyId id = w.addBody(d);
+  const StepResult& res = w.step();
+  std::size_t dup = 0;
+  EXPECT_TRUE(selfCandidates(res, id, dup).empty());
+  EXPECT_EQ(res.stats.self_candidate_pairs, 0u);
+}
+
+TEST(SelfCollision, TwoBodiesAndSelfPairsComeOutTogetherSortedByBodies) {
+  TriMesh cloth = makePatch(2.0, 1.0, 41, 21);
+  const std::vector<Vec3> rest = cloth.vertices;
+  TriMesh ball = makeSphere(0.3, 300).translate(Vec3(-0.6, 0.0, 0.35));
+  SensorWorld w;
+  BodyDesc dc;
+  dc.triangles = cloth.triangles;
+  dc.positions = PositionView::of(cloth.vertices);
+  dc.margin = 0.02;
+  const BodyId c = w.addBody(dc);
+  BodyDesc db;
+  db.triangles = ball.triangles;
+  db.positions = PositionView::of(ball.vertices);
+  db.margin = 0.02;
+  const BodyId b = w.addBody(db);
+  w.step();
+  w.setSelfCollision(c, true);  // the flat cloth is the rest shape
+  cloth.vertices = folded(rest, 0.0, 0.015);
+  w.setPositions(c, PositionView::of(cloth.vertices));
+  const StepResult& res = w.step();
+  std::size_t self = 0, other = 0;
+  for (std::size_t i = 0; i < res.candidates.size(); ++i) {
+    const CandidatePair& p = res.candidates[i];
+    (p.vertex_body == p.triangle_body ? self : other) += 1;
+    EXPECT_NE(p.vertex_body == b && p.triangle_body == b, true) << "the ball has no self-collision";
+    if (i > 0) {
+      const CandidatePair& q = res.candidates[i - 1];
+      EXPECT_LE(std::tie(q.vertex_body, q.triangle_body), std::tie(p.vertex_body, p.triangle_body));
+    }
+  }
+  EXPECT_GT(self, 0u);
+  EXPECT_GT(other, 0u) << "the ball rests in the fold";
+}
+
+TEST(SelfCollision, NeedsTheDefaultOrBoundsModeAndValidSettings) {
+  SensorSettings thesis;
+  thesis.flagging = Flagging::Sensors;
+  SensorWorld w(thesis);
+  TriMesh ball = makeSphere(1.0, 100);
+  BodyDesc d;
+  d.triangles = ball.triangles;
+  d.positions = PositionView::of(ball.vertices);
+  d.self_collision = true;
+  d.name = "ball";
+  try {
+    w.addBody(d);
+    FAIL() << "self-collision in the thesis's mode must throw";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("self-collision"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("ball"), std::string::npos) << e.what();
+  }
+  SensorSettings bad;
+  bad.self_rest_exclusion = 0.5;
+  EXPECT_THROW(SensorWorld{bad}, Error);
+}
+
+}  // namespace
