@@ -151,8 +151,7 @@ bool vertexTunnels(const Vec3& p0, const Vec3& p1, const Vec3& a0, const Vec3& b
 bool CrossingCounter::meetsOther(const std::vector<Box>& body_boxes, std::size_t body, const Box& b) {
   for (std::size_t o = 0; o < body_boxes.size(); ++o) {
     if (o == body) continue;
-    const Box& ob = body_boxes[o];
-    if ((b.lo.array() <= ob.hi.array()).all() && (ob.lo.array() <= b.hi.array()).all()) return true;
+    if (b.meets(body_boxes[o])) return true;
   }
   return false;
 }
@@ -160,96 +159,24 @@ bool CrossingCounter::meetsOther(const std::vector<Box>& body_boxes, std::size_t
 template <class TriBox>
 void CrossingCounter::fillGrid(const std::vector<CrossingMesh>& meshes, const std::vector<Box>& body_boxes,
                                TriBox&& tri_box) {
-  tri_box_.clear();
+  std::vector<Box> boxes;
   tri_body_.clear();
   tri_local_.clear();
-  Box all{Vec3::Constant(std::numeric_limits<double>::infinity()), Vec3::Constant(-std::numeric_limits<double>::infinity())};
   double extent_sum = 0.0;
   for (std::size_t b = 0; b < meshes.size(); ++b) {
     if (!meetsOther(body_boxes, b, body_boxes[b])) continue;
     for (std::size_t t = 0; t < meshes[b].triangles.size(); ++t) {
       Box box;
       if (!tri_box(b, meshes[b].triangles[t], box) || !meetsOther(body_boxes, b, box)) continue;
-      tri_box_.push_back(box);
+      boxes.push_back(box);
       tri_body_.push_back(static_cast<Index>(b));
       tri_local_.push_back(static_cast<Index>(t));
-      extend(all.lo, all.hi, box.lo);
-      extend(all.lo, all.hi, box.hi);
       extent_sum += (box.hi - box.lo).maxCoeff();
     }
   }
-  const std::size_t n = tri_box_.size();
-  stamp_.assign(n, 0u);
-  stamp_now_ = 0;
-  if (n == 0) {
-    dims_[0] = dims_[1] = dims_[2] = 1;
-    origin_ = Vec3::Zero();
-    offsets_.assign(2, 0u);
-    items_.clear();
-    return;
-  }
-  // Cells about the size of a box, but never many more cells than boxes (bodies far apart).
-  const Vec3 extent = (all.hi - all.lo).cwiseMax(Vec3::Constant(1e-12));
-  cell_ = std::max(extent_sum / static_cast<double>(n), 1e-9 * extent.maxCoeff());
-  const double cap = 2.0 * static_cast<double>(n) + 64.0;
-  for (;;) {
-    for (int k = 0; k < 3; ++k) dims_[k] = static_cast<std::int64_t>(std::floor(extent[k] / cell_)) + 1;
-    if (static_cast<double>(dims_[0]) * static_cast<double>(dims_[1]) * static_cast<double>(dims_[2]) <= cap) break;
-    cell_ *= 1.26;
-  }
-  origin_ = all.lo;
-  const std::size_t cells = static_cast<std::size_t>(dims_[0] * dims_[1] * dims_[2]);
-  offsets_.assign(cells + 1, 0u);
-  std::int64_t r[6];
-  for (std::size_t g = 0; g < n; ++g) {
-    cellRange(tri_box_[g], r);
-    for (std::int64_t z = r[2]; z <= r[5]; ++z)
-      for (std::int64_t y = r[1]; y <= r[4]; ++y)
-        for (std::int64_t x = r[0]; x <= r[3]; ++x) ++offsets_[cellIndex(x, y, z) + 1];
-  }
-  for (std::size_t c = 0; c < cells; ++c) offsets_[c + 1] += offsets_[c];
-  items_.resize(offsets_[cells]);
-  std::vector<std::uint32_t> fill(offsets_.begin(), offsets_.end() - 1);
-  for (std::size_t g = 0; g < n; ++g) {
-    cellRange(tri_box_[g], r);
-    for (std::int64_t z = r[2]; z <= r[5]; ++z)
-      for (std::int64_t y = r[1]; y <= r[4]; ++y)
-        for (std::int64_t x = r[0]; x <= r[3]; ++x) items_[fill[cellIndex(x, y, z)]++] = static_cast<std::uint32_t>(g);
-  }
-}
-
-bool CrossingCounter::cellRange(const Box& b, std::int64_t r[6]) const {
-  for (int k = 0; k < 3; ++k) {
-    const double lo = std::floor((b.lo[k] - origin_[k]) / cell_);
-    const double hi = std::floor((b.hi[k] - origin_[k]) / cell_);
-    if (!(hi >= 0.0) || !(lo < static_cast<double>(dims_[k]))) return false;  // also rejects NaN
-    r[k] = std::max<std::int64_t>(0, static_cast<std::int64_t>(lo));
-    r[k + 3] = std::min<std::int64_t>(dims_[k] - 1, static_cast<std::int64_t>(hi));
-  }
-  return true;
-}
-
-template <class F>
-void CrossingCounter::forEachInBox(const Box& query, F&& f) {
-  std::int64_t r[6];
-  if (tri_box_.empty() || !cellRange(query, r)) return;
-  if (++stamp_now_ == 0) {  // wrapped: forget every old stamp
-    std::fill(stamp_.begin(), stamp_.end(), 0u);
-    stamp_now_ = 1;
-  }
-  for (std::int64_t z = r[2]; z <= r[5]; ++z)
-    for (std::int64_t y = r[1]; y <= r[4]; ++y)
-      for (std::int64_t x = r[0]; x <= r[3]; ++x) {
-        const std::size_t c = cellIndex(x, y, z);
-        for (std::uint32_t k = offsets_[c]; k < offsets_[c + 1]; ++k) {
-          const std::uint32_t g = items_[k];
-          if (stamp_[g] == stamp_now_) continue;
-          stamp_[g] = stamp_now_;
-          const Box& tb = tri_box_[g];
-          if ((tb.lo.array() > query.hi.array()).any() || (query.lo.array() > tb.hi.array()).any()) continue;
-          f(tri_body_[g], tri_local_[g]);
-        }
-      }
+  // Cells about the size of a box.
+  const double mean_extent = extent_sum / static_cast<double>(std::max<std::size_t>(boxes.size(), 1));
+  grid_.build(std::move(boxes), mean_extent);
 }
 
 // --- the counts ---
@@ -277,7 +204,8 @@ std::size_t CrossingCounter::edgeCrossings(const std::vector<CrossingMesh>& mesh
       if (!finite(p) || !finite(q)) continue;
       const Box box{p.cwiseMin(q), p.cwiseMax(q)};
       if (!meetsOther(body_boxes, a, box)) continue;
-      forEachInBox(box, [&](Index b, Index t) {
+      grid_.forEachInBox(box.lo, box.hi, [&](Index g) {
+        const Index b = tri_body_[g], t = tri_local_[g];
         if (b == a) return;
         const Triangle& tri = meshes[b].triangles[t];
         count += segmentCrossesTriangle(p, q, x[b][tri[0]], x[b][tri[1]], x[b][tri[2]]);
@@ -320,7 +248,8 @@ std::size_t CrossingCounter::tunnelledVertices(const std::vector<CrossingMesh>& 
       const Box box{p0.cwiseMin(p1), p0.cwiseMax(p1)};
       if (!meetsOther(body_boxes, a, box)) continue;
       bool tunnelled = false;
-      forEachInBox(box, [&](Index b, Index t) {
+      grid_.forEachInBox(box.lo, box.hi, [&](Index g) {
+        const Index b = tri_body_[g], t = tri_local_[g];
         if (tunnelled || b == a) return;
         const Triangle& tri = meshes[b].triangles[t];
         const auto& x0 = before[b];

@@ -6,14 +6,15 @@
 //  - tunnelled vertices: a vertex of A whose path over the step (a segment from its position before
 //    the step to after it) passes through a triangle of B ≠ A moving linearly from its own before
 //    to after positions (a continuous vertex–triangle test).
-// Both use a uniform grid over triangle boxes (swept boxes for the tunnelling), filled only with
-// the triangles whose box reaches another body's box: nothing is quadratic unless the meshes are.
+// Both use a uniform grid over triangle boxes (testkit::BoxGrid; swept boxes for the tunnelling),
+// filled only with the triangles whose box reaches another body's box: nothing is quadratic unless
+// the meshes are.
 #pragma once
 
+#include "psc/testkit/box_grid.h"
 #include "psc/types.h"
 
 #include <array>
-#include <cstdint>
 #include <vector>
 
 namespace psc::demo {
@@ -66,31 +67,15 @@ class CrossingCounter {
                                 const BodyPositions& after, const std::vector<std::vector<char>>& skip);
 
  private:
-  struct Box {
-    Vec3 lo, hi;
-  };
+  using Box = testkit::Box;
   /// Fills the grid with the triangles whose box (from `tri_box`) meets the box of another body.
   template <class TriBox>
   void fillGrid(const std::vector<CrossingMesh>& meshes, const std::vector<Box>& body_boxes, TriBox&& tri_box);
-  bool cellRange(const Box& b, std::int64_t r[6]) const;
-  std::size_t cellIndex(std::int64_t x, std::int64_t y, std::int64_t z) const {
-    return static_cast<std::size_t>((z * dims_[1] + y) * dims_[0] + x);
-  }
-  /// Calls f(body, triangle) once for every triangle in the grid whose box meets `query`.
-  template <class F>
-  void forEachInBox(const Box& query, F&& f);
   /// Some body other than `body` has a box meeting `b`: items far from every other body need no test.
   static bool meetsOther(const std::vector<Box>& body_boxes, std::size_t body, const Box& b);
 
-  std::vector<Box> tri_box_;
+  testkit::BoxGrid grid_;  // item g: triangle tri_local_[g] of body tri_body_[g]
   std::vector<Index> tri_body_, tri_local_;
-  double cell_ = 1.0;
-  Vec3 origin_ = Vec3::Zero();
-  std::int64_t dims_[3] = {1, 1, 1};
-  std::vector<std::uint32_t> offsets_;  // CSR over cells
-  std::vector<std::uint32_t> items_;    // indices into tri_box_
-  std::vector<std::uint32_t> stamp_;
-  std::uint32_t stamp_now_ = 0;
 };
 
 /// References: every edge against every triangle of every other body, and every vertex against

@@ -1,7 +1,7 @@
 // The contacts that exist (docs/BENCHMARK.md, "Ground truth"), computed independently of both
-// pipelines: a dense uniform grid over the triangles of all bodies and an exact point-triangle
-// distance in double. Shares no candidate-finding code with psc::core or the plugin; a test checks
-// it against the brute-force reference below on small scenes, both radii.
+// pipelines: a dense uniform grid over the triangles of all bodies and the exact point-triangle
+// distance in double, both from psc::testkit. Shares no candidate-finding code with psc::core or
+// the plugin; a test checks it against the brute-force reference below on small scenes, both radii.
 //
 // For bodies A ≠ B, vertex v of A and triangle t of B are in contact when dist(v, t) < r with
 //   strict: r = margin_A + margin_B
@@ -11,6 +11,7 @@
 // as "outside the truth".
 #pragma once
 
+#include "psc/testkit/box_grid.h"
 #include "psc/types.h"
 
 #include <cstdint>
@@ -71,15 +72,12 @@ struct TruthResult {
   const TruthContact* find(const ContactKey& key) const;  ///< binary search; nullptr if absent
 };
 
-/// Squared distance from p to triangle (a, b, c), exact up to double rounding (Ericson, Real-Time
-/// Collision Detection §5.1.5); degenerate triangles fall back to their edges.
-double pointTriangleDistanceSquared(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
-
 struct Penetration;
 class TriangleGrid;
 Penetration measurePenetration(const std::vector<TruthBody>& bodies, TriangleGrid& grid);
 
-/// Uniform grid over all triangles of all bodies, rebuilt from scratch for each query set.
+/// Uniform grid over all triangles of all bodies (a testkit::BoxGrid over their boxes), rebuilt
+/// from scratch for each query set.
 class TriangleGrid {
  public:
   /// cell ≤ 0: chosen from the mean edge length; the cell count is capped near 2× the triangles.
@@ -87,7 +85,9 @@ class TriangleGrid {
 
   /// Calls f(body, triangle) once for every triangle whose bounding box meets [lo, hi].
   template <class F>
-  void forEachInBox(const Vec3& lo, const Vec3& hi, F&& f) const;
+  void forEachInBox(const Vec3& lo, const Vec3& hi, F&& f) const {
+    grid_.forEachInBox(lo, hi, [&](Index g) { f(tri_body_[g], tri_local_[g]); });
+  }
 
   /// Parity of the crossings of the ray from p along +axis (0, 1, 2) with `body`'s triangles.
   /// Edges and vertices hit exactly are counted once by a consistent tie rule.
@@ -96,29 +96,14 @@ class TriangleGrid {
   /// Distance from p to the nearest triangle of `body`, searching outward from `start` (> 0).
   double nearestDistance(const Vec3& p, Index body, double start) const;
 
-  double cellSize() const { return cell_; }
-  std::size_t triangleCount() const { return tri_body_.size(); }
-
  private:
   friend class GroundTruth;
   friend Penetration measurePenetration(const std::vector<TruthBody>& bodies, TriangleGrid& grid);
-  bool cellRange(const Vec3& lo, const Vec3& hi, std::int64_t r[6]) const;
-  std::size_t cellIndex(std::int64_t x, std::int64_t y, std::int64_t z) const {
-    return static_cast<std::size_t>((z * dims_[1] + y) * dims_[0] + x);
-  }
 
   const std::vector<TruthBody>* bodies_ = nullptr;
-  double cell_ = 1.0;
-  Vec3 origin_ = Vec3::Zero();
-  std::int64_t dims_[3] = {1, 1, 1};
-  std::vector<std::uint32_t> offsets_;  // CSR over cells
-  std::vector<std::uint32_t> items_;    // global triangle ids
+  testkit::BoxGrid grid_;                // item g: triangle tri_local_[g] of body tri_body_[g]
   std::vector<Index> tri_body_, tri_local_;
-  std::vector<Vec3> tri_lo_, tri_hi_;
   std::vector<Vec3> body_lo_, body_hi_;  // bounds of each body's triangles
-  mutable std::vector<std::uint32_t> stamp_;
-  mutable std::uint32_t stamp_now_ = 0;
-  std::uint32_t nextStamp() const;
 };
 
 /// Computes the truth with the grid; keeps its buffers between calls.
@@ -143,29 +128,5 @@ struct Penetration {
   std::size_t vertices = 0;     ///< (vertex, body) pairs found penetrating
 };
 Penetration measurePenetration(const std::vector<TruthBody>& bodies, TriangleGrid& grid);
-
-// --- template implementation ---
-template <class F>
-void TriangleGrid::forEachInBox(const Vec3& lo, const Vec3& hi, F&& f) const {
-  std::int64_t r[6];
-  if (!cellRange(lo, hi, r)) return;
-  const std::uint32_t s = nextStamp();
-  for (std::int64_t z = r[2]; z <= r[5]; ++z)
-    for (std::int64_t y = r[1]; y <= r[4]; ++y)
-      for (std::int64_t x = r[0]; x <= r[3]; ++x) {
-        const std::size_t c = cellIndex(x, y, z);
-        for (std::uint32_t k = offsets_[c]; k < offsets_[c + 1]; ++k) {
-          const std::uint32_t g = items_[k];
-          if (stamp_[g] == s) continue;
-          stamp_[g] = s;
-          const Vec3& tl = tri_lo_[g];
-          const Vec3& th = tri_hi_[g];
-          if (tl.x() > hi.x() || tl.y() > hi.y() || tl.z() > hi.z() || th.x() < lo.x() || th.y() < lo.y() ||
-              th.z() < lo.z())
-            continue;
-          f(tri_body_[g], tri_local_[g]);
-        }
-      }
-}
 
 }  // namespace psc::demo

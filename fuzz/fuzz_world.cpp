@@ -16,8 +16,8 @@
 #include "psc/error.h"
 #include "psc/partition.h"
 #include "psc/shapes.h"
+#include "psc/testkit/reference.h"
 #include "psc/world.h"
-#include "reference.h"
 
 #include <algorithm>
 #include <cmath>
@@ -148,22 +148,25 @@ void checkCoverage(const SensorWorld& world, const std::vector<Held>& bodies) {
   for (const Held& a : bodies)
     for (const Held& b : bodies) {
       if (a.id == b.id) continue;
-      for (Index t = 0; t < b.mesh.triangles.size(); ++t) {
+      const auto radius = [&](Index v) {
+        const double motion = a.previous.empty() ? 0.0 : (a.mesh.vertices[v] - a.previous[v]).norm();
+        return 0.5 * (a.margin + b.margin + factor * motion);
+      };
+      const auto flat = [&](Index, Index t) {
         const Triangle& tri = b.mesh.triangles[t];
         const Vec3 &p = b.mesh.vertices[tri[0]], &q = b.mesh.vertices[tri[1]], &r = b.mesh.vertices[tri[2]];
         const double longest = std::max({(q - p).norm(), (r - q).norm(), (p - r).norm()});
-        if (!((q - p).cross(r - p).norm() > 1e-6 * longest * longest)) continue;
-        for (Index v = 0; v < a.mesh.vertices.size(); ++v) {
-          const Vec3& x = a.mesh.vertices[v];
-          const double motion = a.previous.empty() ? 0.0 : (x - a.previous[v]).norm();
-          const double radius = 0.5 * (a.margin + b.margin + factor * motion);
-          const double distance = test::pointTriangleDistance(x, p, q, r);
-          if (!(distance < radius) || cand.count({a.id, v, b.id, t}) == 1) continue;
-          std::fprintf(stderr, "psc fuzz: vertex %u of body %u at distance %g of triangle %u of body %u (radius %g)\n",
-                       v, a.id, distance, t, b.id, radius);
-          require(false, "a vertex-triangle pair within the contact radius is a candidate");
-        }
-      }
+        return !((q - p).cross(r - p).norm() > 1e-6 * longest * longest);
+      };
+      testkit::forEachContact(a.mesh.vertices, b.mesh.vertices, b.mesh.triangles, radius, flat,
+                              [&](Index v, Index t, double distance) {
+                                if (cand.count({a.id, v, b.id, t}) == 1) return;
+                                std::fprintf(stderr,
+                                             "psc fuzz: vertex %u of body %u at distance %g of triangle %u of body "
+                                             "%u (radius %g)\n",
+                                             v, a.id, distance, t, b.id, radius(v));
+                                require(false, "a vertex-triangle pair within the contact radius is a candidate");
+                              });
     }
 }
 

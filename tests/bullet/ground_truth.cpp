@@ -13,6 +13,7 @@ Vec3 toVec(const btVector3& v) { return {double(v.x()), double(v.y()), double(v.
 struct BodyCache {
   std::vector<Vec3> x;
   std::vector<double> motion;  // |x − q|
+  std::vector<psc::Triangle> faces;  // node indices
   std::vector<Vec3> face_lo, face_hi;
   std::vector<bool> degenerate;
   Vec3 lo, hi;
@@ -37,15 +38,17 @@ BodyCache cacheOf(const btSoftBody& body) {
   }
   const btSoftBody::Node* first = n > 0 ? &body.m_nodes[0] : nullptr;
   const int f = body.m_faces.size();
+  c.faces.resize(f);
   c.face_lo.resize(f);
   c.face_hi.resize(f);
   c.degenerate.resize(f);
   for (int t = 0; t < f; ++t) {
     const btSoftBody::Face& face = body.m_faces[t];
-    Vec3 lo = c.x[face.m_n[0] - first], hi = lo;
+    for (int k = 0; k < 3; ++k) c.faces[t][k] = static_cast<psc::Index>(face.m_n[k] - first);
+    Vec3 lo = c.x[c.faces[t][0]], hi = lo;
     for (int k = 1; k < 3; ++k) {
-      lo = lo.cwiseMin(c.x[face.m_n[k] - first]);
-      hi = hi.cwiseMax(c.x[face.m_n[k] - first]);
+      lo = lo.cwiseMin(c.x[c.faces[t][k]]);
+      hi = hi.cwiseMax(c.x[c.faces[t][k]]);
     }
     c.face_lo[t] = lo;
     c.face_hi[t] = hi;
@@ -68,34 +71,24 @@ GroundTruth compute(const btAlignedObjectArray<btSoftBody*>& bodies, bool prefil
     truth.degenerate_faces += static_cast<std::size_t>(std::count(caches[b].degenerate.begin(), caches[b].degenerate.end(), true));
   for (int a = 0; a < bodies.size(); ++a) {
     const BodyCache& A = caches[a];
-    const btSoftBody::Node* first_a = bodies[a]->m_nodes.size() > 0 ? &bodies[a]->m_nodes[0] : nullptr;
-    (void)first_a;
     for (int b = 0; b < bodies.size(); ++b) {
       if (a == b) continue;
       const BodyCache& B = caches[b];
-      const btSoftBody& body_b = *bodies[b];
-      const btSoftBody::Node* first_b = &body_b.m_nodes[0];
       const double strict = A.margin + B.margin;
       const double reach = (strict + 2.0 * A.max_motion) * (1.0 + kRadiusTolerance) + 1e-6;
       if (prefilter && ((A.lo.array() - reach > B.hi.array()).any() || (B.lo.array() > A.hi.array() + reach).any()))
         continue;
-      for (std::size_t v = 0; v < A.x.size(); ++v) {
-        const Vec3& p = A.x[v];
-        const double full = strict + 2.0 * A.motion[v];
-        const double allowed = full * (1.0 + kRadiusTolerance) + 1e-6;
-        for (int t = 0; t < body_b.m_faces.size(); ++t) {
-          if (B.degenerate[t]) continue;
-          if (prefilter && pointBoxDistance(p, B.face_lo[t], B.face_hi[t]) >= allowed) continue;
-          const btSoftBody::Face& face = body_b.m_faces[t];
-          const double d = pointTriangleDistance(p, B.x[face.m_n[0] - first_b], B.x[face.m_n[1] - first_b],
-                                                 B.x[face.m_n[2] - first_b]);
-          if (d >= allowed) continue;
-          const ContactKey key{a, int(v), b, t};
-          truth.allowed.push_back(key);
-          if (d < full * (1.0 - kRadiusTolerance)) truth.full.push_back(key);
-          if (d < strict * (1.0 - kRadiusTolerance)) truth.strict.push_back(key);
-        }
-      }
+      const auto full = [&](psc::Index v) { return strict + 2.0 * A.motion[v]; };
+      const auto allowed = [&](psc::Index v) { return full(v) * (1.0 + kRadiusTolerance) + 1e-6; };
+      const auto skip = [&](psc::Index v, psc::Index t) {
+        return B.degenerate[t] || (prefilter && pointBoxDistance(A.x[v], B.face_lo[t], B.face_hi[t]) >= allowed(v));
+      };
+      psc::testkit::forEachContact(A.x, B.x, B.faces, allowed, skip, [&](psc::Index v, psc::Index t, double d) {
+        const ContactKey key{a, int(v), b, int(t)};
+        truth.allowed.push_back(key);
+        if (d < full(v) * (1.0 - kRadiusTolerance)) truth.full.push_back(key);
+        if (d < strict * (1.0 - kRadiusTolerance)) truth.strict.push_back(key);
+      });
     }
   }
   std::sort(truth.strict.begin(), truth.strict.end());
@@ -118,30 +111,6 @@ std::set<std::pair<int, int>> bodyPairs(const std::vector<ContactKey>& keys) {
 }
 
 }  // namespace
-
-Vec3 closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0 && d2 <= 0) return a;
-  const Vec3 bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0 && d4 <= d3) return b;
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + (d1 / (d1 - d3)) * ab;
-  const Vec3 cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0 && d5 <= d6) return c;
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + (d2 / (d2 - d6)) * ac;
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b);
-  const double denom = 1.0 / (va + vb + vc);
-  return a + ab * (vb * denom) + ac * (vc * denom);
-}
-
-double pointTriangleDistance(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  return (closestPointOnTriangle(p, a, b, c) - p).norm();
-}
 
 GroundTruth bruteForceContacts(const btAlignedObjectArray<btSoftBody*>& bodies) { return compute(bodies, true); }
 GroundTruth bruteForceContactsNoPrefilter(const btAlignedObjectArray<btSoftBody*>& bodies) {

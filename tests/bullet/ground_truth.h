@@ -2,8 +2,10 @@
 // A and face t of body B ≠ A are in contact when the exact distance from x_v to triangle t is
 // below a radius, strict = margin_A + margin_B, full = strict + 2·|x_v − q_v| (Bullet's
 // CollideVF_SS acceptance). Both directions. Independent of the plugin and of the core: it shares
-// no candidate-finding code with either.
+// no candidate-finding code with either (the distance and the brute-force loop are psc::testkit's).
 #pragma once
+
+#include "psc/testkit/reference.h"
 
 #include <BulletSoftBody/btSoftBody.h>
 
@@ -18,9 +20,8 @@ namespace psc_test {
 
 using Vec3 = Eigen::Vector3d;
 
-/// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5), in double.
-Vec3 closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
-double pointTriangleDistance(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+/// The exact point-triangle distance in double (psc::testkit).
+using psc::testkit::pointTriangleDistance;
 
 /// A (node, face) contact; bodies are indices into the soft body array the contacts came from.
 struct ContactKey {

@@ -2,11 +2,11 @@
 // message names the problem; every accepted oddity must be reported in MeshReport and still step.
 // Hard conditions are checked against brute force: in the default flagging mode every
 // vertex-triangle pair within margin_A + margin_B + motion_factor·|x − x_prev| must be a candidate.
-#include "reference.h"
 
 #include "psc/error.h"
 #include "psc/partition.h"
 #include "psc/shapes.h"
+#include "psc/testkit/reference.h"
 #include "psc/world.h"
 
 #include <gtest/gtest.h>
@@ -107,18 +107,21 @@ Coverage coverage(const SensorWorld& w, const std::vector<Body>& bodies, const S
       const Body &a = bodies[i], &b = bodies[j];
       const double reach = radius[i] + radius[j] + a.margin + b.margin + factor * motion[i];
       if ((centre[i] - centre[j]).norm() > reach) continue;
-      for (Index v = 0; v < a.mesh.vertices.size(); ++v) {
-        const Vec3& x = a.mesh.vertices[v];
-        const double r = a.margin + b.margin + (a.previous.empty() ? 0.0 : factor * (x - a.previous[v]).norm());
-        for (Index t = 0; t < b.mesh.triangles.size(); ++t) {
-          const Triangle& tri = b.mesh.triangles[t];
-          const Vec3 &p = b.mesh.vertices[tri[0]], &q = b.mesh.vertices[tri[1]], &s = b.mesh.vertices[tri[2]];
-          if ((q - p).cross(s - p).squaredNorm() == 0.0) continue;  // no distance to a degenerate triangle
-          if (!(test::pointTriangleDistance(x, p, q, s) < r)) continue;
-          ++c.truth;
-          c.missed += cand.count({a.id, v, b.id, t}) == 0;
-        }
-      }
+      const auto contact_radius = [&](Index v) {
+        return a.margin + b.margin +
+               (a.previous.empty() ? 0.0 : factor * (a.mesh.vertices[v] - a.previous[v]).norm());
+      };
+      // Zero-area triangles are left out, as the world reports them degenerate (MeshReport).
+      const auto zero_area = [&](Index, Index t) {
+        const Triangle& tri = b.mesh.triangles[t];
+        const Vec3 &p = b.mesh.vertices[tri[0]], &q = b.mesh.vertices[tri[1]], &s = b.mesh.vertices[tri[2]];
+        return (q - p).cross(s - p).squaredNorm() == 0.0;
+      };
+      testkit::forEachContact(a.mesh.vertices, b.mesh.vertices, b.mesh.triangles, contact_radius, zero_area,
+                              [&](Index v, Index t, double) {
+                                ++c.truth;
+                                c.missed += cand.count({a.id, v, b.id, t}) == 0;
+                              });
     }
   return c;
 }
@@ -624,7 +627,7 @@ TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
           for (int k = 0; k <= 64 && !meets; ++k) {
             const double s = k / 64.0;
             const auto at = [&](const Body& x, Index u) { return Vec3((1 - s) * x.previous[u] + s * x.mesh.vertices[u]); };
-            meets = test::pointTriangleDistance(at(a, v), at(b, tri[0]), at(b, tri[1]), at(b, tri[2])) < r;
+            meets = testkit::pointTriangleDistance(at(a, v), at(b, tri[0]), at(b, tri[1]), at(b, tri[2])) < r;
           }
           if (!meets) continue;
           ++met;

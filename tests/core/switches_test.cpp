@@ -2,9 +2,9 @@
 // one_ring, no_backtrack), and the midphase's memory stays flat over a long deforming run.
 #include "psc/mesh.h"
 #include "psc/shapes.h"
+#include "psc/testkit/reference.h"
 #include "psc/world.h"
 
-#include "core/reference.h"
 #include "core/test_util.h"
 
 #include <gtest/gtest.h>
@@ -64,7 +64,7 @@ std::vector<StepRecord> record(SensorWorld& world, int steps, const std::functio
     const TriMesh* meshes[2] = {a, b};
     if (a != nullptr && b != nullptr)
       for (BodyId i = 0; i < 2; ++i)
-        for (const auto& [v, t] : test::bruteContacts(*meshes[i], *meshes[1 - i], radius)) {
+        for (const auto& [v, t] : testkit::bruteContacts(*meshes[i], *meshes[1 - i], radius)) {
           ++rec.truth;
           rec.found += cand.count(std::make_tuple(i, v, BodyId{1 - i}, t));
         }

@@ -1,12 +1,12 @@
 // The SensorWorld against brute force: the thesis's chapter-4 cases placed by hand, candidate
 // sets, determinism, repartitioning and bad input.
-#include "reference.h"
 
 #include "test_util.h"
 
 #include "psc/error.h"
 #include "psc/repartition.h"
 #include "psc/shapes.h"
+#include "psc/testkit/reference.h"
 #include "psc/world.h"
 
 #include <gtest/gtest.h>
@@ -74,7 +74,7 @@ CoverageReport coverage(Scene& sc, const StepResult& res, double radius) {
   for (std::size_t i = 0; i < sc.meshes.size(); ++i)
     for (std::size_t j = 0; j < sc.meshes.size(); ++j) {
       if (i == j) continue;
-      for (const auto& [v, t] : test::bruteContacts(sc.meshes[i], sc.meshes[j], radius)) {
+      for (const auto& [v, t] : testkit::bruteContacts(sc.meshes[i], sc.meshes[j], radius)) {
         ++rep.truth;
         bool in = false, by_sensor = false;
         for (const Sets& s : sets)
@@ -186,7 +186,7 @@ void checkCandidates(Flagging mode) {
       for (Index v : cs.vertices)
         for (Index t : cs.triangles) {
           const Triangle& tri = tm.triangles[t];
-          if (test::pointTriangleDistance(vm.vertices[v], tm.vertices[tri[0]], tm.vertices[tri[1]],
+          if (testkit::pointTriangleDistance(vm.vertices[v], tm.vertices[tri[0]], tm.vertices[tri[1]],
                                           tm.vertices[tri[2]]) < 2 * margin) {
             ++near;
             EXPECT_TRUE(cand.count({cs.vertex_body, v, cs.triangle_body, t})) << "vertex " << v << " triangle " << t;
@@ -439,7 +439,7 @@ TEST(SensorDecision, ObliqueCurvedContactFewerCandidatesSameContacts) {
     for (const CandidatePair& c : res->candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
     std::size_t truth = 0, found = 0;
     for (int i = 0; i < 2; ++i)
-      for (const auto& [v, t] : test::bruteContacts(sc.meshes[i], sc.meshes[1 - i], 2.0 * margin)) {
+      for (const auto& [v, t] : testkit::bruteContacts(sc.meshes[i], sc.meshes[1 - i], 2.0 * margin)) {
         ++truth;
         found += cand.count({sc.ids[i], v, sc.ids[1 - i], t});
       }

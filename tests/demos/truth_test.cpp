@@ -1,6 +1,6 @@
-// The benchmark's ground truth against references: the exact distance against dense sampling,
-// the grid against brute force (random soups and real scene states, both radii), and the inside
-// test against shapes whose inside is known.
+// The benchmark's ground truth against references: the grid against brute force (random soups and
+// real scene states, both radii), and the inside test against shapes whose inside is known. The
+// exact distance itself is psc::testkit's, tested in tests/testkit_test.cpp.
 #include "bullet_scene.h"
 #include "ground_truth.h"
 #include "scenes.h"
@@ -16,41 +16,6 @@ namespace {
 Vec3 randomVec(std::mt19937_64& rng, double lo, double hi) {
   std::uniform_real_distribution<double> u(lo, hi);
   return {u(rng), u(rng), u(rng)};
-}
-
-/// Minimum distance to points sampled on the triangle: an upper bound of the exact distance that
-/// approaches it as the sampling gets finer.
-double sampledDistance(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, int n) {
-  double best = INFINITY;
-  for (int i = 0; i <= n; ++i)
-    for (int j = 0; i + j <= n; ++j) {
-      const double u = double(i) / n, v = double(j) / n;
-      best = std::min(best, (p - (a + u * (b - a) + v * (c - a))).norm());
-    }
-  return best;
-}
-
-TEST(TruthDistance, MatchesDenseSampling) {
-  std::mt19937_64 rng(7);
-  for (int trial = 0; trial < 300; ++trial) {
-    const Vec3 a = randomVec(rng, -1, 1), b = randomVec(rng, -1, 1), c = randomVec(rng, -1, 1);
-    const Vec3 p = randomVec(rng, -2, 2);
-    const double exact = std::sqrt(pointTriangleDistanceSquared(p, a, b, c));
-    const double sampled = sampledDistance(p, a, b, c, 200);
-    const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
-    EXPECT_LE(exact, sampled + 1e-12) << "trial " << trial;
-    EXPECT_LE(sampled - exact, longest / 200.0 + 1e-12) << "trial " << trial;
-  }
-}
-
-TEST(TruthDistance, KnownCasesAndDegenerateTriangles) {
-  const Vec3 a(0, 0, 0), b(1, 0, 0), c(0, 1, 0);
-  EXPECT_DOUBLE_EQ(pointTriangleDistanceSquared({0.2, 0.2, 0.5}, a, b, c), 0.25);   // above the face
-  EXPECT_DOUBLE_EQ(pointTriangleDistanceSquared({-1, -1, 0}, a, b, c), 2.0);       // nearest a vertex
-  EXPECT_DOUBLE_EQ(pointTriangleDistanceSquared({0.5, -2, 0}, a, b, c), 4.0);      // nearest an edge
-  // Collinear and point-like triangles fall back to segments.
-  EXPECT_DOUBLE_EQ(pointTriangleDistanceSquared({0.5, 1, 0}, a, b, Vec3(2, 0, 0)), 1.0);
-  EXPECT_DOUBLE_EQ(pointTriangleDistanceSquared({0, 3, 4}, a, a, a), 25.0);
 }
 
 /// Bodies of random small triangles in overlapping boxes, with random margins and motion.

@@ -1,0 +1,62 @@
+#include "psc/testkit/reference.h"
+
+#include <algorithm>
+
+namespace psc::testkit {
+namespace {
+
+/// Closest point of segment ab to p (a itself when the segment has no length).
+Vec3 closestPointOnSegment(const Vec3& p, const Vec3& a, const Vec3& b) {
+  const Vec3 ab = b - a;
+  const double len2 = ab.squaredNorm();
+  const double t = len2 > 0.0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
+  return a + t * ab;
+}
+
+}  // namespace
+
+Vec3 closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 ab = b - a, ac = c - a;
+  const double n2 = ab.cross(ac).squaredNorm();
+  if (!(n2 > 1e-24 * ab.squaredNorm() * ac.squaredNorm()) || n2 == 0.0) {
+    const Vec3 on_edge[3] = {closestPointOnSegment(p, a, b), closestPointOnSegment(p, b, c),
+                             closestPointOnSegment(p, c, a)};
+    return *std::min_element(std::begin(on_edge), std::end(on_edge), [&](const Vec3& x, const Vec3& y) {
+      return (p - x).squaredNorm() < (p - y).squaredNorm();
+    });
+  }
+  const Vec3 ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return a;
+  const Vec3 bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return a + (d1 / (d1 - d3)) * ab;
+  const Vec3 cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return a + (d2 / (d2 - d6)) * ac;
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) return b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b);
+  const double denom = 1.0 / (va + vb + vc);
+  return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+double pointTriangleDistanceSquared(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  return (p - closestPointOnTriangle(p, a, b, c)).squaredNorm();
+}
+
+double pointTriangleDistance(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  return (p - closestPointOnTriangle(p, a, b, c)).norm();
+}
+
+std::vector<std::pair<Index, Index>> bruteContacts(const TriMesh& vm, const TriMesh& tm, double radius) {
+  std::vector<std::pair<Index, Index>> out;
+  forEachContact(vm.vertices, tm.vertices, tm.triangles, [&](Index) { return radius; },
+                 [&](Index v, Index t, double) { out.emplace_back(v, t); });
+  return out;
+}
+
+}  // namespace psc::testkit
