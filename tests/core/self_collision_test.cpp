@@ -5,7 +5,7 @@
 #include "psc/error.h"
 #include "psc/shapes.h"
 #include "psc/world.h"
-#include "reference.h"
+#include "psc/testkit/reference.h"
 
 #include <gtest/gtest.h>
 
@@ -49,11 +49,11 @@ Reference bruteForce(const TriMesh& mesh, const std::vector<Vec3>& rest, double 
     for (Index t = 0; t < mesh.triangles.size(); ++t) {
       const Triangle& tri = mesh.triangles[t];
       const Vec3& x = mesh.vertices[v];
-      if (!(test::pointTriangleDistance(x, mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]]) <
+      if (!(testkit::pointTriangleDistance(x, mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]]) <
             2.0 * margin))
         continue;
       const bool incident = tri[0] == v || tri[1] == v || tri[2] == v;
-      if (incident || test::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) <
+      if (incident || testkit::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) <
                           exclusion * 2.0 * margin) {
         ++r.excluded;
         continue;
@@ -108,7 +108,7 @@ TEST(SelfCollision, FlatClothHasNoSelfCandidatesFoldedClothHasEveryPairOfItsLaye
   for (const auto& [v, t] : got) {
     const Triangle& tri = cloth.triangles[t];
     ASSERT_FALSE(tri[0] == v || tri[1] == v || tri[2] == v) << "vertex " << v << " in its own triangle " << t;
-    ASSERT_GE(test::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]),
+    ASSERT_GE(testkit::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]),
               w.settings().self_rest_exclusion * 2.0 * margin * (1.0 - 1e-9))
         << "excluded pair " << v << ", " << t;
   }
