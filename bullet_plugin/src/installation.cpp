@@ -191,6 +191,7 @@ void Installation::endOfDispatch() noexcept {
   try {
     senseOncePerStep();
     if (step_ok_ && settings_.beyond_broadphase) collideUndispatchedPairs();
+    if (step_ok_) collideSelfPairs();
   } catch (const std::exception& error) {
     stats_.error = error.what();
   } catch (...) {
@@ -205,6 +206,7 @@ void Installation::collideUndispatchedPairs() {
     const psc::BodyId vb = candidates[i].vertex_body;
     const psc::BodyId tb = candidates[i].triangle_body;
     while (i < candidates.size() && candidates[i].vertex_body == vb && candidates[i].triangle_body == tb) ++i;
+    if (vb == tb) continue;  // self-collision: collideSelfPairs
     const std::uint64_t key = (std::uint64_t{std::min(vb, tb)} << 32) | std::max(vb, tb);
     if (collided_pairs_.count(key) != 0) continue;
     btSoftBody* a = registry_.bodyOf(vb);
@@ -217,6 +219,42 @@ void Installation::collideUndispatchedPairs() {
     collidePair(*a, vb, *b, tb);
     ++stats_.beyond_broadphase_pairs;
   }
+}
+
+void Installation::syncSelfCollision() {
+  for (psc::BodyId id : sensors_.bodyIds()) {
+    const btSoftBody* body = registry_.bodyOf(id);
+    if (body == nullptr) continue;
+    const auto it = self_overrides_.find(body);
+    const bool on = it != self_overrides_.end() ? it->second : settings_.self_collision;
+    if (on != sensors_.selfCollision(id)) sensors_.setSelfCollision(id, on);
+  }
+}
+
+void Installation::collideSelfPairs() {
+  const std::vector<psc::CandidatePair>& candidates = sensors_.lastResult().candidates;
+  for (psc::BodyId id : sensors_.bodyIds()) {
+    if (!sensors_.selfCollision(id)) continue;
+    btSoftBody* body = registry_.bodyOf(id);
+    const auto range = candidatesOf(candidates, id, id);
+    if (body == nullptr || range.first == range.second) continue;
+    const auto start = std::chrono::steady_clock::now();
+    const ExactCounts counts = collideCandidates(settings_.exact, *body, *body, range.first, range.second);
+    stats_.exact_tests += counts.tests;
+    stats_.contacts += counts.contacts;
+    stats_.robust_contacts += counts.robust;
+    stats_.crossing_contacts += counts.crossings;
+    stats_.self_exact_tests += counts.tests;
+    stats_.self_contacts += counts.contacts;
+    ++stats_.self_bodies;
+    stats_.ms_exact += millisecondsSince(start);
+  }
+}
+
+void Installation::setSelfCollision(const btSoftBody* body, bool on) {
+  if (body == nullptr) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  self_overrides_[body] = on;
 }
 
 void Installation::countFallback() noexcept {
@@ -243,7 +281,8 @@ void Installation::senseOncePerStep() {
     registry_.sync(
         world_.getSoftBodyArray(), [this](const btSoftBody& body) { return participates(body); }, sensors_, sync,
         left);
-    for (const btSoftBody* body : left) overrides_.erase(body);
+    for (const btSoftBody* body : left) overrides_.erase(body), self_overrides_.erase(body);
+    syncSelfCollision();
     stats_.bodies = sync.bodies;
     stats_.skipped_bodies = sync.skipped;
     stats_.skipped_reason = sync.first_rejection;

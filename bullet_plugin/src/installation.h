@@ -58,6 +58,7 @@ class Installation {
 
   // --- Plugin's API ---
   void setEnabled(const btSoftBody* body, std::optional<bool> enabled);
+  void setSelfCollision(const btSoftBody* body, bool on);
   bool participates(const btSoftBody& body) const;
   void refreshBody(const btSoftBody* body);
   const Stats& stats() const { return stats_; }
@@ -78,6 +79,10 @@ class Installation {
   /// the way Bullet filters dispatched pairs (broadphase groups/masks and overlap filter callback,
   /// dispatcher's needsCollision).
   void collideUndispatchedPairs();
+  /// Switches the core's self-collision of each body to what the settings and overrides say.
+  void syncSelfCollision();
+  /// Each self-colliding body against itself, from the step's candidates.
+  void collideSelfPairs();
 
   btSoftRigidDynamicsWorld& world_;
   btCollisionDispatcher& dispatcher_;
@@ -88,6 +93,7 @@ class Installation {
   psc::SensorWorld sensors_;
   detail::BodyRegistry registry_;
   std::unordered_map<const btSoftBody*, bool> overrides_;
+  std::unordered_map<const btSoftBody*, bool> self_overrides_;
 
   mutable std::mutex mutex_;  ///< Bullet may dispatch pairs from several threads (btCollisionDispatcherMt)
   bool step_ok_ = false;

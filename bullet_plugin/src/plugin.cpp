@@ -25,6 +25,10 @@ void Plugin::clearEnabled(const btSoftBody* body) {
   if (impl_) impl_->setEnabled(body, std::nullopt);
 }
 
+void Plugin::setSelfCollision(const btSoftBody* body, bool on) {
+  if (impl_) impl_->setSelfCollision(body, on);
+}
+
 bool Plugin::participates(const btSoftBody* body) const {
   return impl_ && body != nullptr && impl_->participates(*body);
 }

@@ -17,8 +17,10 @@
 // - for each pair of participating bodies runs Bullet's own btSoftColliders::CollideVF_SS on the
 //   core's candidate (node, face) pairs, both directions, each at most once per step, so the
 //   btSoftBody::SContacts are the ones Bullet's default path makes for the same (node, face);
-// - soft-rigid, rigid-rigid and self-collision are untouched; pairs with a non-participating body
-//   go to the algorithm registered before install() (Bullet's own by default).
+// - soft-rigid and rigid-rigid collision are untouched; pairs with a non-participating body go to
+//   the algorithm registered before install() (Bullet's own by default);
+// - self-collision only where asked (Settings::self_collision, setSelfCollision): the core's
+//   self candidates of the body through the same exact test, at the end of the dispatch.
 //
 // Lifetime: the Plugin must be destroyed (or uninstall()ed) before the world, its dispatcher and
 // its broadphase, like any object one adds to a world. Destruction restores the previous algorithm.
@@ -62,6 +64,10 @@ class Plugin {
   void setEnabled(const btSoftBody* body, bool enabled);
   /// Back to the rule of Settings::opt_in for this body.
   void clearEnabled(const btSoftBody* body);
+  /// Self-collision of one body (overrides Settings::self_collision); kept like setEnabled. The
+  /// body's node positions when the sensors first see it with self-collision on are its rest shape:
+  /// node-face pairs that close there are never self contacts (psc::SensorWorld::setSelfCollision).
+  void setSelfCollision(const btSoftBody* body, bool on);
   /// Whether the body participates under the current rule and overrides (whatever its world).
   bool participates(const btSoftBody* body) const;
   /// The body's triangles changed in place (same counts, same buffers): re-read them next step.

@@ -60,6 +60,10 @@ struct Settings {
   /// node's segment (m_q → m_x) meets the face's swept volume (exact.h, firstCrossing): with it the
   /// plugin sets `sensors.motion_bound` to MotionBound::Swept whatever it says here.
   ExactTest exact = ExactTest::Bullet;
+  /// [beyond] Self-collision (a body's nodes against its own faces, through the sensor regions)
+  /// for every participating body; Plugin::setSelfCollision overrides it per body. Off keeps
+  /// Bullet's behaviour: btSoftRigidDynamicsWorld has no vertex-face self-collision.
+  bool self_collision = false;
 };
 
 }  // namespace psc::bullet

@@ -41,6 +41,9 @@ struct Stats {
   std::size_t contacts = 0;           ///< btSoftBody::SContacts produced
   std::size_t robust_contacts = 0;    ///< of contacts: made where Bullet's test refuses (Settings::exact Robust/Continuous)
   std::size_t crossing_contacts = 0;  ///< of contacts: nodes that passed through a face this step (Continuous)
+  std::size_t self_bodies = 0;        ///< bodies collided with themselves this step
+  std::size_t self_exact_tests = 0;   ///< of exact_tests: a body's nodes against its own faces
+  std::size_t self_contacts = 0;      ///< of contacts: a body's nodes against its own faces
   /// Body pairs over the runaway rule (runawayContacts) this step: the bodies are deep inside each
   /// other or faster than the contact radius can follow,
   /// and Bullet's contact response is feeding on itself (each contact pushes its node out to

@@ -1,0 +1,92 @@
+// Self-collision through the plugin (Settings::self_collision, Plugin::setSelfCollision): a cloth
+// lying flat gets no self contacts; the same cloth folded so that its halves are within the
+// margins gets self contacts from Bullet's own CollideVF_SS, only where switched on.
+#include "psc/bullet/bullet.h"
+#include "psc/shapes.h"
+#include "soft_world.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+int selfContacts(const btSoftBody& body) {
+  int n = 0;
+  for (int i = 0; i < body.m_scontacts.size(); ++i) {
+    const btSoftBody::Face* f = body.m_scontacts[i].m_face;
+    n += body.m_faces.size() > 0 && f >= &body.m_faces[0] && f < &body.m_faces[0] + body.m_faces.size();
+  }
+  return n;
+}
+
+/// Folds the cloth's nodes (x > 0) over a cylinder of radius rho: the halves end 2·rho apart.
+void fold(btSoftBody& cloth, double rho) {
+  for (int i = 0; i < cloth.m_nodes.size(); ++i) {
+    btVector3& x = cloth.m_nodes[i].m_x;
+    const double s = double(x.x());
+    if (s <= 0.0) continue;
+    const double y = double(x.y());
+    if (s <= kPi * rho) {
+      x = btVector3(btScalar(rho * std::sin(s / rho)), btScalar(y), btScalar(rho * (1.0 - std::cos(s / rho))));
+    } else {
+      x = btVector3(btScalar(-(s - kPi * rho)), btScalar(y), btScalar(2.0 * rho));
+    }
+    cloth.m_nodes[i].m_q = x;
+    cloth.m_nodes[i].m_v = btVector3(0, 0, 0);
+  }
+}
+
+struct Folding {
+  psc_test::SoftWorld w{0};
+  btSoftBody* cloth = nullptr;
+  Folding() {
+    psc_test::SoftParams params;
+    params.margin = 0.02;
+    params.shape_matching = 0;
+    cloth = w.addSoft(psc::makePatch(2.0, 1.0, 41, 21), params);
+  }
+};
+
+TEST(SelfCollision, FoldedClothGetsSelfContactsOnlyWhereSwitchedOn) {
+  for (const bool on : {false, true}) {
+    Folding f;
+    psc::bullet::Settings settings;
+    settings.self_collision = on;
+    auto plugin = psc::bullet::install(f.w.world, settings);
+    int flat = -1, folded = -1;
+    f.w.run(1, [&] { flat = selfContacts(*f.cloth); });  // the flat cloth is the rest shape
+    EXPECT_EQ(flat, 0) << "a flat cloth must not touch itself";
+    fold(*f.cloth, 0.015);
+    f.w.run(1, [&] { folded = selfContacts(*f.cloth); });
+    if (on) {
+      EXPECT_GT(folded, 100) << "the folded halves are within the margins";
+      EXPECT_EQ(std::size_t(folded), plugin.stats().self_contacts);
+      EXPECT_GT(plugin.stats().self_exact_tests, 0u);
+      EXPECT_EQ(plugin.stats().self_bodies, 1u);
+    } else {
+      EXPECT_EQ(folded, 0) << "Bullet's world has no vertex-face self-collision";
+      EXPECT_EQ(plugin.stats().self_contacts, 0u);
+    }
+  }
+}
+
+TEST(SelfCollision, PerBodySwitchOverridesTheSettings) {
+  Folding f;
+  auto plugin = psc::bullet::install(f.w.world);
+  plugin.setSelfCollision(f.cloth, true);
+  f.w.run(1);
+  fold(*f.cloth, 0.015);
+  int folded = -1;
+  f.w.run(1, [&] { folded = selfContacts(*f.cloth); });
+  EXPECT_GT(folded, 100);
+  ASSERT_TRUE(plugin.bodyId(f.cloth));
+  EXPECT_TRUE(plugin.sensorWorld().selfCollision(*plugin.bodyId(f.cloth)));
+  plugin.setSelfCollision(f.cloth, false);
+  f.w.run(1, [&] { folded = selfContacts(*f.cloth); });
+  EXPECT_EQ(folded, 0);
+}
+
+}  // namespace
