@@ -70,7 +70,13 @@ std::pair<const psc::CandidatePair*, const psc::CandidatePair*> candidatesOf(
 /// during the step (MotionBound::Swept), not Bullet's radius about the end positions.
 psc::SensorSettings coreSettings(const Settings& settings) {
   psc::SensorSettings core = settings.sensors;
-  if (settings.exact == ExactTest::Continuous) core.motion_bound = psc::MotionBound::Swept;
+  if (settings.exact == ExactTest::Continuous) {
+    if (core.flagging == psc::Flagging::Sensors)
+      throw psc::Error(psc::ErrorCode::InvalidSettings,
+                       "psc::bullet::Settings: exact = Continuous needs the swept motion bound, which "
+                       "sensors.flagging = Sensors (the thesis's flag-only mode) does not support");
+    core.motion_bound = psc::MotionBound::Swept;
+  }
   return core;
 }
 

@@ -514,6 +514,16 @@ TEST(ExactTests, SettingsExactIsValidatedAndNamed) {
     EXPECT_EQ(e.code(), psc::ErrorCode::InvalidSettings);
     EXPECT_NE(std::string(e.what()).find("Settings::exact"), std::string::npos) << e.what();
   }
+  // Continuous needs the swept bound, which the thesis's flag-only mode does not have.
+  s.exact = ExactTest::Continuous;
+  s.sensors.flagging = psc::Flagging::Sensors;
+  try {
+    auto plugin = psc::bullet::install(w.world, s);
+    FAIL() << "accepted Continuous with the thesis's flag-only mode";
+  } catch (const psc::Error& e) {
+    EXPECT_EQ(e.code(), psc::ErrorCode::InvalidSettings);
+    EXPECT_NE(std::string(e.what()).find("exact = Continuous"), std::string::npos) << e.what();
+  }
   for (ExactTest t : {ExactTest::Bullet, ExactTest::Robust, ExactTest::Continuous})
     EXPECT_EQ(psc::bullet::exactTestFromString(psc::bullet::toString(t)), t);
   EXPECT_THROW(psc::bullet::exactTestFromString("exact"), psc::Error);
