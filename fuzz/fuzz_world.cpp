@@ -9,8 +9,8 @@
 //           8 thesis split rule | 16 previous positions (motion term) | 32 third body |
 //           64 replaceMesh | 128 four-direction area estimator
 //   byte 1  vertex count n (0..64)           byte 2  particle override (0 = auto) / LBG count
-//   byte 3  margin                           byte 4, 5  offset of the copy (x, y)
-//   byte 6  scale exponent                   byte 7  velocity for the motion term
+//   byte 3  margin (odd: self-collision of the fuzzed body)   byte 4, 5  offset of the copy (x, y)
+//   byte 6  scale exponent                   byte 7  velocity for the motion term (odd: swept bound)
 //   then    n×3 coordinates: int8/8 each, or little-endian doubles with flag 1
 //   then    triangles, 3 index bytes each (index = byte mod (n+1), so n itself is out of range)
 #include "psc/error.h"
@@ -67,6 +67,8 @@ struct Input {
   double margin = 0.0;
   Vec3 offset = Vec3::Zero();
   double speed = 0.0;
+  bool self_collision = false;  ///< the fuzzed body collides with itself (default flagging only)
+  bool swept = false;           ///< MotionBound::Swept (default flagging only)
   TriMesh mesh;
 };
 
@@ -76,11 +78,15 @@ Input decode(const std::uint8_t* data, std::size_t size) {
   in.flags = r.byte();
   const std::size_t n = r.byte() % (kMaxVertices + 1);
   in.particles = r.byte() % 9;
-  in.margin = r.byte() / 256.0;
+  const std::uint8_t margin_byte = r.byte();
+  in.margin = margin_byte / 256.0;
+  in.self_collision = (margin_byte & 1) != 0;
   const double ox = static_cast<std::int8_t>(r.byte()) / 16.0;
   const double oy = static_cast<std::int8_t>(r.byte()) / 16.0;
   const int exponent = static_cast<std::int8_t>(r.byte()) / 4;
-  in.speed = r.byte() / 64.0;
+  const std::uint8_t speed_byte = r.byte();
+  in.speed = speed_byte / 64.0;
+  in.swept = (speed_byte & 1) != 0;
   const double scale = std::ldexp(1.0, exponent);
   in.offset = Vec3(ox, oy, 0.0) * scale;
   in.margin *= scale;
@@ -170,15 +176,30 @@ void checkCoverage(const SensorWorld& world, const std::vector<Held>& bodies) {
     }
 }
 
+// Self pairs never hold a triangle with its own vertex (CollideVF_SS would accept it at distance 0).
+void checkSelfPairs(const SensorWorld& world, const std::vector<Held>& bodies) {
+  for (const CandidatePair& c : world.lastResult().candidates) {
+    if (c.vertex_body != c.triangle_body) continue;
+    require(world.selfCollision(c.vertex_body), "self pairs only for bodies with self-collision");
+    for (const Held& h : bodies)
+      if (h.id == c.vertex_body) {
+        const Triangle& t = h.mesh.triangles.at(c.triangle);
+        require(t[0] != c.vertex && t[1] != c.vertex && t[2] != c.vertex, "no self pair of a vertex and its own triangle");
+      }
+  }
+}
+
 void runWorld(const Input& in) {
   SensorSettings s;
   s.flagging = (in.flags & 2) ? Flagging::Sensors : Flagging::SensorsAndBounds;
+  if (in.swept && s.flagging == Flagging::SensorsAndBounds) s.motion_bound = MotionBound::Swept;
   s.partition.split = (in.flags & 8) ? SplitRule::Thesis : SplitRule::Principal;
   s.repartition.estimator = (in.flags & 128) ? AreaEstimator::FourDirectionWalk : AreaEstimator::TrueArea;
   s.repartition.check_every = 1;
   s.max_rounds = 16;
   SensorWorld world(s);
-  const bool conservative = s.flagging == Flagging::SensorsAndBounds;
+  // The coverage contract below is the radius bound's; the swept bound's is a unit test's.
+  const bool conservative = s.flagging == Flagging::SensorsAndBounds && s.motion_bound == MotionBound::Radius;
 
   std::shared_ptr<const ConvexParts> parts;
   if (in.flags & 4) {
@@ -205,6 +226,7 @@ void runWorld(const Input& in) {
     }
   add(world, bodies[0], "fuzzed", parts);
   add(world, bodies[1], "copy", parts);
+  if (in.self_collision && s.flagging == Flagging::SensorsAndBounds) world.setSelfCollision(bodies[0].id, true);
   if (in.flags & 32) {
     Held ball;
     ball.mesh = makeIcosphere(0.5, 0);
@@ -216,6 +238,7 @@ void runWorld(const Input& in) {
 
   world.step();
   if (conservative) checkCoverage(world, bodies);
+  checkSelfPairs(world, bodies);
 
   // Stretch the fuzzed body to twice its size: a repartition check runs every step.
   Held& a = bodies[0];
@@ -228,6 +251,7 @@ void runWorld(const Input& in) {
   world.setPositions(a.id, PositionView::of(a.mesh.vertices), PositionView::of(a.previous));
   world.step();
   if (conservative) checkCoverage(world, bodies);
+  checkSelfPairs(world, bodies);
 
   if (in.flags & 64) {
     // A rebuilt mesh with one more vertex (a fan triangle on the first edge).
@@ -238,12 +262,14 @@ void runWorld(const Input& in) {
     world.replaceMesh(a.id, a.mesh.triangles, PositionView::of(a.mesh.vertices));
     world.step();
     if (conservative) checkCoverage(world, bodies);
+    checkSelfPairs(world, bodies);
   }
 
   world.removeBody(bodies[1].id);
   bodies.erase(bodies.begin() + 1);
   world.step();
   if (conservative) checkCoverage(world, bodies);
+  checkSelfPairs(world, bodies);
 }
 
 void runPartition(const Input& in) {
