@@ -51,6 +51,13 @@ std::string summary(const RunResult& r) {
   s += ", crossings max " + std::to_string(r.intersections_max) + " (" + std::to_string(r.intersections_steps) +
        " steps), tunnelled " + std::to_string(r.tunnelled_total) + " (worst step " +
        std::to_string(r.tunnelled_worst_step) + ")";
+  s += ", self-crossings max " + std::to_string(r.self_intersections_max) + " (" +
+       std::to_string(r.self_intersections_steps) + " steps)";
+  if (r.has_self_truth) {
+    s += ", self strict " + fmt("%.4f", r.self_recall_strict) + " of " + std::to_string(r.self_truth_strict_total) +
+         ", " + std::to_string(r.self_contacts_found_total) + " self contacts";
+    if (r.has_full) s += " (" + std::to_string(r.self_contacts_outside_truth) + " outside)";
+  }
   if (r.runaway_steps)
     s += ", RUNAWAY in " + std::to_string(r.runaway_steps) + " steps (first: " + r.runaway_warning + ")";
   if (r.diverged_at_step >= 0) s += ", DIVERGED after step " + std::to_string(r.diverged_at_step);
