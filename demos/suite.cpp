@@ -88,6 +88,7 @@ std::vector<Job> defaultSuite() {
     Job j;
     j.scene = info.name;
     j.params.resolution = 1000;
+    j.self_collision = info.name == "cloth_fold" || info.name == "tube_coil";
     jobs.push_back(j);
   }
   for (std::size_t res : {500, 1000, 2000, 4000}) {
@@ -145,6 +146,7 @@ int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ost
       for (Pipeline p : options.pipelines) {
         RunOptions ro = options.run;
         ro.steps = steps;
+        ro.self_collision = ro.self_collision || job.self_collision;
         if (job.warmup) ro.warmup = job.warmup;
         if (!ro.frames_dir.empty())
           ro.frames_name = scene.name + "_" + std::to_string(scene.resolution()) + "v_" +
