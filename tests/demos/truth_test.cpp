@@ -3,6 +3,7 @@
 // exact distance itself is psc::testkit's, tested in tests/testkit_test.cpp.
 #include "bullet_scene.h"
 #include "ground_truth.h"
+#include "psc/testkit/reference.h"
 #include "scenes.h"
 
 #include <gtest/gtest.h>
@@ -193,6 +194,29 @@ TEST(SelfTruth, FoldedClothAgainstBruteForceAndTheInitialShapeAsRest) {
   ASSERT_GT(most_strict, 20u) << "the folded cloth should touch itself";
   const TruthResult brute = groundTruthSelfBruteForce(most, rest, 2.0, s);
   expectSame(truth.computeSelf(most, rest, 2.0, s), brute, "cloth_fold");
+}
+
+TEST(SelfTruth, TheInitialMeshExcludesWhatThePluginsFirstStepExcludes) {
+  // The plugin takes its rest shape at its first step (m_x after the first predictMotion); the self
+  // truth takes the scene's initial mesh. Every pair of the self scenes is excluded by both or by
+  // neither.
+  for (const char* name : {"cloth_fold", "tube_coil"}) {
+    const Scene scene = makeScene(name, SceneParams{});
+    SceneWorld sw(scene);
+    std::vector<TruthBody> bodies;
+    sw.world().after_collision = [&] { bodies = bodiesOf(sw); };
+    sw.step();
+    const std::vector<Vec3>& initial = scene.bodies[0].mesh.vertices;
+    const TruthBody& first = bodies.at(0);
+    std::size_t excluded = 0;
+    for (Index v = 0; v < initial.size(); ++v)
+      for (const Triangle& t : first.triangles) {
+        const bool by_initial = testkit::selfPairExcluded(v, t, initial, first.margin, 2.0);
+        ASSERT_EQ(by_initial, testkit::selfPairExcluded(v, t, first.x, first.margin, 2.0)) << name << " vertex " << v;
+        excluded += by_initial;
+      }
+    EXPECT_GT(excluded, 3 * initial.size()) << name << ": the rule excludes every vertex's own neighbourhood";
+  }
 }
 
 TEST(TruthInside, BoxWithRaysAlongEdgesAndVertices) {
