@@ -61,6 +61,10 @@ int rootsInUnit(double k0, double k1, double k2, double out[2]) {
 
 bool finite(const Vec3& v) { return v.allFinite(); }
 
+bool sharesVertex(const Edge& e, const Triangle& t) {
+  return e[0] == t[0] || e[0] == t[1] || e[0] == t[2] || e[1] == t[0] || e[1] == t[1] || e[1] == t[2];
+}
+
 /// Grows `box` (lo, hi) by p.
 void extend(Vec3& lo, Vec3& hi, const Vec3& p) {
   lo = lo.cwiseMin(p);
@@ -215,6 +219,39 @@ std::size_t CrossingCounter::edgeCrossings(const std::vector<CrossingMesh>& mesh
   return count;
 }
 
+std::size_t CrossingCounter::selfEdgeCrossings(const std::vector<CrossingMesh>& meshes, const BodyPositions& x) {
+  std::size_t count = 0;
+  std::vector<Box> boxes;
+  for (std::size_t b = 0; b < meshes.size(); ++b) {
+    const CrossingMesh& mesh = meshes[b];
+    const std::vector<Vec3>& xb = x[b];
+    boxes.clear();
+    tri_local_.clear();
+    double extent_sum = 0.0;
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+      const Vec3 &p0 = xb[mesh.triangles[t][0]], &p1 = xb[mesh.triangles[t][1]], &p2 = xb[mesh.triangles[t][2]];
+      if (!finite(p0) || !finite(p1) || !finite(p2)) continue;
+      Box box{p0.cwiseMin(p1).cwiseMin(p2), p0.cwiseMax(p1).cwiseMax(p2)};
+      pad(box.lo, box.hi);
+      extent_sum += (box.hi - box.lo).maxCoeff();
+      boxes.push_back(box);
+      tri_local_.push_back(static_cast<Index>(t));
+    }
+    if (boxes.empty()) continue;
+    const double mean_extent = extent_sum / static_cast<double>(boxes.size());
+    grid_.build(boxes, mean_extent);
+    for (const Edge& e : mesh.edges) {
+      const Vec3 &p = xb[e[0]], &q = xb[e[1]];
+      if (!finite(p) || !finite(q)) continue;
+      grid_.forEachInBox(p.cwiseMin(q), p.cwiseMax(q), [&](Index g) {
+        const Triangle& tri = mesh.triangles[tri_local_[g]];
+        if (!sharesVertex(e, tri)) count += segmentCrossesTriangle(p, q, xb[tri[0]], xb[tri[1]], xb[tri[2]]);
+      });
+    }
+  }
+  return count;
+}
+
 std::size_t CrossingCounter::tunnelledVertices(const std::vector<CrossingMesh>& meshes, const BodyPositions& before,
                                                const BodyPositions& after, const std::vector<std::vector<char>>& skip) {
   const Box empty{Vec3::Constant(std::numeric_limits<double>::infinity()),
@@ -271,6 +308,15 @@ std::size_t edgeCrossingsBruteForce(const std::vector<CrossingMesh>& meshes, con
         for (const Triangle& t : meshes[b].triangles)
           count += segmentCrossesTriangle(x[a][e[0]], x[a][e[1]], x[b][t[0]], x[b][t[1]], x[b][t[2]]);
       }
+  return count;
+}
+
+std::size_t selfEdgeCrossingsBruteForce(const std::vector<CrossingMesh>& meshes, const BodyPositions& x) {
+  std::size_t count = 0;
+  for (std::size_t b = 0; b < meshes.size(); ++b)
+    for (const Edge& e : meshes[b].edges)
+      for (const Triangle& t : meshes[b].triangles)
+        if (!sharesVertex(e, t)) count += segmentCrossesTriangle(x[b][e[0]], x[b][e[1]], x[b][t[0]], x[b][t[1]], x[b][t[2]]);
   return count;
 }
 

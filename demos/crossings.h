@@ -3,6 +3,8 @@
 //  - edge–triangle crossings: an undirected mesh edge of body A whose segment properly intersects a
 //    triangle of body B ≠ A, on the positions after the step. Two surfaces that pass into each
 //    other cross along the curve where they meet, whether or not they are closed.
+//  - self crossings: the same within one body, between an edge and a triangle that share no vertex
+//    (an edge always touches the triangles around it): a surface passing through itself.
 //  - tunnelled vertices: a vertex of A whose path over the step (a segment from its position before
 //    the step to after it) passes through a triangle of B ≠ A moving linearly from its own before
 //    to after positions (a continuous vertex–triangle test).
@@ -60,6 +62,10 @@ class CrossingCounter {
   /// both directions count (A's edges on B's triangles and B's edges on A's).
   std::size_t edgeCrossings(const std::vector<CrossingMesh>& meshes, const BodyPositions& x);
 
+  /// (edge, triangle) pairs of the same body that share no vertex and with segmentCrossesTriangle,
+  /// each once, summed over the bodies. One grid per body over its own triangles.
+  std::size_t selfEdgeCrossings(const std::vector<CrossingMesh>& meshes, const BodyPositions& x);
+
   /// Vertices v of some body A for which vertexTunnels holds against at least one triangle of a
   /// body B ≠ A between `before` and `after`, leaving out the vertices with skip[A][v] ≠ 0 (skip
   /// may be empty: none left out).
@@ -81,6 +87,8 @@ class CrossingCounter {
 /// References: every edge against every triangle of every other body, and every vertex against
 /// every triangle of every other body.
 std::size_t edgeCrossingsBruteForce(const std::vector<CrossingMesh>& meshes, const BodyPositions& x);
+/// Every edge against every triangle of its own body that shares no vertex with it.
+std::size_t selfEdgeCrossingsBruteForce(const std::vector<CrossingMesh>& meshes, const BodyPositions& x);
 std::size_t tunnelledVerticesBruteForce(const std::vector<CrossingMesh>& meshes, const BodyPositions& before,
                                         const BodyPositions& after, const std::vector<std::vector<char>>& skip);
 

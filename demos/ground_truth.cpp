@@ -197,6 +197,38 @@ const TruthResult& GroundTruth::compute(const std::vector<TruthBody>& bodies, co
   return result_;
 }
 
+const TruthResult& GroundTruth::computeSelf(const std::vector<TruthBody>& bodies,
+                                            const std::vector<std::vector<Vec3>>& rest, double rest_exclusion,
+                                            const TruthSettings& s) {
+  self_result_.contacts.clear();
+  self_result_.distance_tests = 0;
+  grid_.build(bodies);
+  for (std::size_t a = 0; a < bodies.size(); ++a) {
+    const TruthBody& A = bodies[a];
+    const double rs = 2.0 * A.margin;
+    for (std::size_t v = 0; v < A.x.size(); ++v) {
+      const Vec3& p = A.x[v];
+      const double motion = s.full ? 2.0 * (p - A.prev[v]).norm() : 0.0;
+      const double rf = rs + motion, rmax = s.full ? rf : rs;
+      const double reach = rmax + band(rmax, s);
+      grid_.forEachInBox(p - Vec3::Constant(reach), p + Vec3::Constant(reach), [&](Index b, Index t) {
+        if (b != a) return;
+        const Triangle& tri = A.triangles[t];
+        if (tri[0] == v || tri[1] == v || tri[2] == v) return;
+        const double d2 = testkit::pointTriangleDistanceSquared(p, A.x[tri[0]], A.x[tri[1]], A.x[tri[2]]);
+        ++self_result_.distance_tests;
+        if (d2 > reach * reach || testkit::selfPairExcluded(static_cast<Index>(v), tri, rest[a], A.margin, rest_exclusion))
+          return;
+        pushIfAny(self_result_.contacts, {static_cast<Index>(a), static_cast<Index>(v), b, t}, std::sqrt(d2), rs, rf, s);
+      });
+    }
+  }
+  std::sort(self_result_.contacts.begin(), self_result_.contacts.end(),
+            [](const TruthContact& x, const TruthContact& y) { return x.key < y.key; });
+  countUp(self_result_);
+  return self_result_;
+}
+
 TruthResult groundTruthBruteForce(const std::vector<TruthBody>& bodies, const TruthSettings& s) {
   TruthResult r;
   for (std::size_t a = 0; a < bodies.size(); ++a) {
@@ -216,6 +248,30 @@ TruthResult groundTruthBruteForce(const std::vector<TruthBody>& bodies, const Tr
       });
       r.distance_tests += A.x.size() * B.triangles.size();
     }
+  }
+  std::sort(r.contacts.begin(), r.contacts.end(), [](const TruthContact& x, const TruthContact& y) { return x.key < y.key; });
+  countUp(r);
+  return r;
+}
+
+TruthResult groundTruthSelfBruteForce(const std::vector<TruthBody>& bodies, const std::vector<std::vector<Vec3>>& rest,
+                                      double rest_exclusion, const TruthSettings& s) {
+  TruthResult r;
+  for (std::size_t a = 0; a < bodies.size(); ++a) {
+    const TruthBody& A = bodies[a];
+    const double rs = 2.0 * A.margin;
+    const auto motion = [&](Index v) { return s.full ? 2.0 * (A.x[v] - A.prev[v]).norm() : 0.0; };
+    const auto radius = [&](Index v) {
+      const double rmax = s.full ? rs + motion(v) : rs;
+      return std::nextafter(rmax + band(rmax, s), std::numeric_limits<double>::infinity());
+    };
+    const auto excluded = [&](Index v, Index t) {
+      return testkit::selfPairExcluded(v, A.triangles[t], rest[a], A.margin, rest_exclusion);
+    };
+    testkit::forEachContact(A.x, A.x, A.triangles, radius, excluded, [&](Index v, Index t, double d) {
+      pushIfAny(r.contacts, {static_cast<Index>(a), v, static_cast<Index>(a), t}, d, rs, rs + motion(v), s);
+    });
+    r.distance_tests += A.x.size() * A.triangles.size();
   }
   std::sort(r.contacts.begin(), r.contacts.end(), [](const TruthContact& x, const TruthContact& y) { return x.key < y.key; });
   countUp(r);

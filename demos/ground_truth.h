@@ -9,6 +9,10 @@
 // Bullet decides in single precision; a pair within a thin band around r (tolerance below) could go
 // either way on rounding alone, so it is classed Ambiguous: neither required for recall nor counted
 // as "outside the truth".
+//
+// Self-collision (computeSelf): vertex v and triangle t of the same body at the same radii with
+// margin_B = margin_A, leaving out the pairs the exclusion rule names (testkit::selfPairExcluded:
+// t holds v, or the two were within rest_exclusion × 2 × margin in the body's rest shape).
 #pragma once
 
 #include "psc/testkit/box_grid.h"
@@ -110,15 +114,25 @@ class TriangleGrid {
 class GroundTruth {
  public:
   const TruthResult& compute(const std::vector<TruthBody>& bodies, const TruthSettings& settings);
+  /// Every body's contacts with itself (keys with vertex_body == triangle_body): strict radius
+  /// 2·margin, full 2·margin + 2·|x_v − x_v,prev|, without the pairs testkit::selfPairExcluded
+  /// names for rest[b] (body b's rest shape, its vertex count) and rest_exclusion. Its own result:
+  /// compute()'s stays valid.
+  const TruthResult& computeSelf(const std::vector<TruthBody>& bodies, const std::vector<std::vector<Vec3>>& rest,
+                                 double rest_exclusion, const TruthSettings& settings);
   const TriangleGrid& grid() const { return grid_; }
 
  private:
   TriangleGrid grid_;
-  TruthResult result_;
+  TruthResult result_, self_result_;
 };
 
 /// The reference: every vertex against every triangle of every other body.
 TruthResult groundTruthBruteForce(const std::vector<TruthBody>& bodies, const TruthSettings& settings);
+
+/// The reference for computeSelf: every vertex against every triangle of its own body.
+TruthResult groundTruthSelfBruteForce(const std::vector<TruthBody>& bodies, const std::vector<std::vector<Vec3>>& rest,
+                                      double rest_exclusion, const TruthSettings& settings);
 
 /// Vertices inside another closed body deeper than the strict radius (margin_A + margin_B): the
 /// user-visible failure. Inside = odd crossings along +x and along +y (two rays, so that a ray

@@ -63,7 +63,7 @@ int main(int argc, char** argv) {
   std::size_t steps = 0, warmup = 0, frame_every = 1;
   std::string pipeline = "both", flagging = "default", truth = "both", exact = "bullet", json, csv, frames, plot_dir;
   std::vector<std::string> sweep;
-  bool list = false, no_penetration = false;
+  bool list = false, no_penetration = false, self_collision = false;
   app.add_option("--scene", scenes, "scene name or number, repeatable, or 'all' (default: all; see --list-scenes)");
   app.add_option("--resolution", params.resolution, "vertices per body (default 1000)")->check(CLI::Range(14, 10000000));
   app.add_option("--bodies", params.bodies, "body count, for scenes that take one (default: the scene's)")
@@ -99,6 +99,9 @@ int main(int argc, char** argv) {
   app.add_option("--frame-every", frame_every, "with --frames: every n-th step (default 1)")->check(CLI::Range(1, 1000000));
   app.add_option("--plot", plot_dir, "write PNG plots into DIR (needs gnuplot)");
   app.add_option("--warmup", warmup, "steps left out of the timing means and medians (default min(10, steps/10))");
+  app.add_flag("--self-collision", self_collision,
+               "self-collision on every body of our pipelines (Bullet's own has none), and the self truth "
+               "(self_recall_strict) for every pipeline");
   app.add_flag("--no-penetration", no_penetration, "skip the inside tests after each step");
   app.add_flag("--list-scenes", list, "list the scenes and exit");
   try {
@@ -149,6 +152,7 @@ int main(int argc, char** argv) {
                                             : TruthMode::Both;
     options.run.penetration = !no_penetration;
     options.run.exact = exact;
+    options.run.self_collision = self_collision;
     options.run.frames_dir = frames;
     options.run.frame_every = frame_every;
     options.run.warmup = warmup;

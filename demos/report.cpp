@@ -142,6 +142,15 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["intersections_max"] = r.intersections_max;
   j["intersections_steps"] = r.intersections_steps;
   j["tunnelled_vertices"] = {{"total", r.tunnelled_total}, {"worst_step", r.tunnelled_worst_step}};
+  j["self_collision"] = r.self_collision;
+  j["self_intersections_max"] = r.self_intersections_max;
+  j["self_intersections_steps"] = r.self_intersections_steps;
+  j["self_contacts_found"] = r.self_contacts_found_total;
+  if (r.has_self_truth) {
+    j["self_recall_strict"] = r.self_recall_strict;
+    j["truth_self_strict_contacts"] = r.self_truth_strict_total;
+    if (r.has_full) j["self_contacts_outside_truth"] = r.self_contacts_outside_truth;
+  }
   if (r.has_strict) {
     j["recall_strict_bullet_testable"] = r.recall_strict_testable;
     j["truth_strict_untestable_by_bullet"] = r.truth_strict_untestable;

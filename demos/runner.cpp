@@ -12,12 +12,14 @@
 #include "psc/bullet/stats.h"
 #endif
 
+#include <BulletDynamics/Dynamics/btActionInterface.h>
 #include <sys/resource.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <map>
 #include <memory>
@@ -64,23 +66,27 @@ void copyPositions(SceneWorld& sw, BodyPositions& out) {
   }
 }
 
-/// The soft-soft contacts Bullet's solver will see this step, as (node body, node, face body, face).
-void collectFound(SceneWorld& sw, std::vector<ContactKey>& out) {
+/// The soft-soft contacts Bullet's solver will see this step, as (node body, node, face body, face):
+/// between bodies in `out`, of a body with itself in `self`.
+void collectFound(SceneWorld& sw, std::vector<ContactKey>& out, std::vector<ContactKey>& self) {
   out.clear();
+  self.clear();
   const auto& soft = sw.softBodies();
   for (std::size_t i = 0; i < soft.size(); ++i) {
     const btSoftBody* psb = soft[i];
     for (int c = 0; c < psb->m_scontacts.size(); ++c) {
       const btSoftBody::SContact& sc = psb->m_scontacts[c];
       const int owner = sw.faceOwner(sc.m_face);
-      if (owner < 0 || static_cast<std::size_t>(owner) == i) continue;
+      if (owner < 0) continue;
       const auto node = static_cast<Index>(sc.m_node - &psb->m_nodes[0]);
       const auto face = static_cast<Index>(sc.m_face - &soft[static_cast<std::size_t>(owner)]->m_faces[0]);
-      out.push_back({static_cast<Index>(i), node, static_cast<Index>(owner), face});
+      (static_cast<std::size_t>(owner) == i ? self : out).push_back({static_cast<Index>(i), node, static_cast<Index>(owner), face});
     }
   }
-  std::sort(out.begin(), out.end());
-  out.erase(std::unique(out.begin(), out.end()), out.end());
+  for (std::vector<ContactKey>* keys : {&out, &self}) {
+    std::sort(keys->begin(), keys->end());
+    keys->erase(std::unique(keys->begin(), keys->end()), keys->end());
+  }
 }
 
 /// The body pairs of `found` (sorted) over the plugin's runaway rule (psc::bullet::runawayContacts),
@@ -121,6 +127,19 @@ bool diverged(SceneWorld& sw, double far_out) {
     }
   return false;
 }
+
+/// Calls a function from Bullet's updateActions. Added after the plugin's own action (its end of the
+/// dispatch, where it makes the self contacts), it sees every contact of the step, at the same
+/// positions (m_x predicted, m_q previous), before the soft-body solve.
+class CallAction final : public btActionInterface {
+ public:
+  explicit CallAction(std::function<void()> f) : f_(std::move(f)) {}
+  void updateAction(btCollisionWorld*, btScalar) override { f_(); }
+  void debugDraw(btIDebugDraw*) override {}
+
+ private:
+  std::function<void()> f_;
+};
 
 struct PairKey {
   Index a, b;
@@ -199,6 +218,7 @@ RunResult describeRun(const Scene& scene, Pipeline pipeline, const RunOptions& o
   if (pipeline == Pipeline::Sensors) r.flagging = toString(opt.flagging);
   if (pipeline == Pipeline::Bounds) r.flagging = "bounds";
   r.exact = pipeline == Pipeline::Bullet ? "bullet" : opt.exact;
+  r.self_collision = pipeline != Pipeline::Bullet && opt.self_collision;
   r.bodies = scene.bodies.size();
   r.resolution = scene.resolution();
   r.steps = opt.steps ? opt.steps : scene.default_steps;
@@ -206,6 +226,7 @@ RunResult describeRun(const Scene& scene, Pipeline pipeline, const RunOptions& o
   r.has_strict = opt.truth == TruthMode::Strict || opt.truth == TruthMode::Both;
   r.has_full = opt.truth == TruthMode::Full || opt.truth == TruthMode::Both;
   r.has_sensor_figures = pipeline != Pipeline::Bullet;
+  r.has_self_truth = opt.self_collision && r.has_strict;
   r.warmup = opt.warmup ? std::min(opt.warmup, r.steps - 1)
                         : std::min<std::size_t>(10, std::max<std::size_t>(1, r.steps / 10));
   return r;
@@ -221,6 +242,9 @@ psc::Flagging coreFlagging(Pipeline pipeline, FlaggingMode mode) {
 class Run {
  public:
   Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool strict, bool full);
+  ~Run() { world_.world().removeAction(&after_actions_); }
+  Run(const Run&) = delete;
+  Run& operator=(const Run&) = delete;
 
   /// Steps the world once and fills `rec`: the step's times, and (from the hook after collision
   /// detection) the contacts found and their comparison with the truth.
@@ -246,19 +270,30 @@ class Run {
   /// exactly what CollideVF_SS used, and m_scontacts holds this step's contacts.
   void afterCollision();
   void compareWithTruth(StepRecord& rec);
+  /// After the plugin's action: this step's self contacts, and with RunOptions::self_collision and a
+  /// strict truth, their comparison with the self truth.
+  void afterActions();
+  void compareWithSelfTruth(StepRecord& rec);
+  /// Triangles CollideVF_SS refuses outright (|cross|² ≤ SIMD_EPSILON), on bodies_ as last extracted.
+  bool untestable(const ContactKey& k) const;
 
   const Scene& scene_;
   Pipeline pipeline_;
   const RunOptions& opt_;
   SceneWorld world_;
   std::unique_ptr<SensorPipeline> sensors_;
+  CallAction after_actions_{[this] { afterActions(); }};
   ZoneTimer zone_{"Deformable Collision"};
   TruthSettings truth_settings_;
   GroundTruth truth_;
   const TruthResult* last_truth_ = nullptr;
   TriangleGrid pen_grid_;
   std::vector<TruthBody> bodies_;
-  std::vector<ContactKey> found_;
+  std::vector<ContactKey> found_, found_self_;
+  /// The self truth's rest shapes: the scene's initial mesh of each body, which is what the plugin
+  /// takes at its first step (its m_x then: the initial positions moved by one step, all nodes alike).
+  std::vector<std::vector<Vec3>> rest_;
+  double rest_exclusion_ = psc::SensorSettings{}.self_rest_exclusion;
   std::set<PairKey> truth_pairs_, found_pairs_;
   std::vector<CrossingMesh> crossing_meshes_;  ///< body i = scene.bodies[i]'s triangles
   CrossingCounter crossings_;
@@ -285,13 +320,15 @@ WorldOptions worldOptions(Pipeline pipeline) {
 Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool strict, bool full)
     : scene_(scene), pipeline_(pipeline), opt_(opt), world_(scene, worldOptions(pipeline)) {
   if (pipeline != Pipeline::Bullet)
-    sensors_ = std::make_unique<SensorPipeline>(world_, coreFlagging(pipeline, opt.flagging), opt.exact);
+    sensors_ = std::make_unique<SensorPipeline>(world_, coreFlagging(pipeline, opt.flagging), opt.exact,
+                                                opt.self_collision);
   truth_settings_.strict = strict;
   truth_settings_.full = full;
   world_.world().before_collision = [this] {
     zone_.arm(true);
     detect_start_ = Clock::now();
   };
+  world_.world().addAction(&after_actions_);  // after the plugin's
   world_.world().after_collision = [this] {
     zone_.arm(false);
     current_->ms.detect = msSince(detect_start_);
@@ -303,6 +340,8 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
     for (const Vec3& v : b.mesh.vertices) far_out_ = std::max(far_out_, v.cwiseAbs().maxCoeff());
   far_out_ *= 1000.0;
   for (const SoftBodySpec& b : scene.bodies) crossing_meshes_.push_back(crossingMesh(b.mesh.triangles));
+  if (opt.self_collision)
+    for (const SoftBodySpec& b : scene.bodies) rest_.push_back(b.mesh.vertices);
   if (!opt.frames_dir.empty()) {
     frames_ = std::make_unique<FrameSeries>(
         opt.frames_dir, opt.frames_name.empty() ? scene.name + "_" + toString(pipeline) : opt.frames_name);
@@ -329,11 +368,40 @@ void Run::step(StepRecord& rec) {
 }
 
 void Run::afterCollision() {
-  collectFound(world_, found_);
+  collectFound(world_, found_, found_self_);
   current_->n.contacts_found = found_.size();
   current_->n.runaway_pairs = runawayPairs(world_, found_, current_->runaway);
   if (pipeline_ == Pipeline::Bullet) current_->n.exact_tests = countVFExactTests(world_.world());
   if (opt_.truth != TruthMode::None) compareWithTruth(*current_);
+}
+
+void Run::afterActions() {
+  const auto h0 = Clock::now();
+  std::vector<ContactKey> between;  // found_ already has them, taken before the plugin's action
+  collectFound(world_, between, found_self_);
+  current_->n.self_contacts_found = found_self_.size();
+  if (opt_.self_collision && opt_.truth != TruthMode::None && truth_settings_.strict) compareWithSelfTruth(*current_);
+  current_->ms.hooks += msSince(h0);
+}
+
+bool Run::untestable(const ContactKey& k) const {
+  const TruthBody& tb = bodies_[k.triangle_body];
+  const Triangle& t = tb.triangles[k.triangle];
+  return (tb.x[t[1]] - tb.x[t[0]]).cross(tb.x[t[2]] - tb.x[t[0]]).squaredNorm() <= double(SIMD_EPSILON);
+}
+
+void Run::compareWithSelfTruth(StepRecord& rec) {
+  // bodies_ and the band are this step's, from compareWithTruth.
+  const auto t0 = Clock::now();
+  const TruthResult& tr = truth_.computeSelf(bodies_, rest_, rest_exclusion_, truth_settings_);
+  rec.ms.truth += msSince(t0);
+  StepCounts& n = rec.n;
+  for (const ContactKey& k : found_self_) {
+    const TruthContact* c = tr.find(k);
+    if (c && c->strict == Membership::Inside && !untestable(k)) ++n.self_found_in_strict;
+    if (truth_settings_.full && (!c || c->full == Membership::Outside)) ++n.self_outside_truth;
+  }
+  for (const TruthContact& c : tr.contacts) n.self_truth_strict += c.strict == Membership::Inside && !untestable(c.key);
 }
 
 void Run::compareWithTruth(StepRecord& rec) {
@@ -347,12 +415,6 @@ void Run::compareWithTruth(StepRecord& rec) {
   last_truth_ = &tr;
   rec.ms.truth = msSince(t0);
   StepCounts& n = rec.n;
-  // Triangles CollideVF_SS refuses outright: |cross|² ≤ SIMD_EPSILON.
-  const auto untestable = [&](const ContactKey& k) {
-    const TruthBody& tb = bodies_[k.triangle_body];
-    const Triangle& t = tb.triangles[k.triangle];
-    return (tb.x[t[1]] - tb.x[t[0]]).cross(tb.x[t[2]] - tb.x[t[0]]).squaredNorm() <= double(SIMD_EPSILON);
-  };
   found_pairs_.clear();
   for (const ContactKey& k : found_) {
     found_pairs_.insert(pairOf(k.vertex_body, k.triangle_body));
@@ -393,6 +455,7 @@ void Run::measureCrossings(StepRecord& rec) {
   for (std::size_t b = 0; b < after_.size(); ++b) had_contact_[b].assign(after_[b].size(), 0);
   for (const ContactKey& k : found_) had_contact_[k.vertex_body][k.vertex] = 1;
   rec.n.edge_crossings = crossings_.edgeCrossings(crossing_meshes_, after_);
+  rec.n.self_edge_crossings = crossings_.selfEdgeCrossings(crossing_meshes_, after_);
   rec.n.tunnelled_vertices = crossings_.tunnelledVertices(crossing_meshes_, before_, after_, had_contact_);
   const double took = msSince(t0);
   rec.ms.crossings += took;
@@ -492,6 +555,12 @@ void summariseCounts(RunResult& r) {
       r.runaway_warning = "step " + std::to_string(&rec - r.per_step.data() + 1) + ": " + rec.runaway;
     r.intersections_max = std::max(r.intersections_max, n.edge_crossings);
     r.intersections_steps += n.edge_crossings > 0;
+    r.self_intersections_max = std::max(r.self_intersections_max, n.self_edge_crossings);
+    r.self_intersections_steps += n.self_edge_crossings > 0;
+    r.self_contacts_found_total += n.self_contacts_found;
+    r.self_truth_strict_total += n.self_truth_strict;
+    r.self_found_in_strict += n.self_found_in_strict;
+    r.self_contacts_outside_truth += n.self_outside_truth;
     r.tunnelled_total += n.tunnelled_vertices;
     r.tunnelled_worst_step = std::max(r.tunnelled_worst_step, n.tunnelled_vertices);
   }
@@ -504,6 +573,8 @@ void summariseCounts(RunResult& r) {
                                        double(r.truth_strict_total - r.truth_strict_untestable)
                                  : 1.0;
   r.recall_full_worst_step = worst_full;
+  r.self_recall_strict =
+      r.self_truth_strict_total ? double(r.self_found_in_strict) / double(r.self_truth_strict_total) : 1.0;
   r.pair_recall = r.truth_pairs_total ? double(r.truth_pairs_found) / double(r.truth_pairs_total) : 1.0;
   r.exact_tests_per_step = double(exact_total) / steps;
   r.flagged_pairs_per_step = double(flagged_total) / steps;

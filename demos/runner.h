@@ -58,6 +58,9 @@ struct RunOptions {
   std::size_t warmup = 0;        ///< steps left out of the timing; 0 = min(10, max(1, steps/10))
   FlaggingMode flagging = FlaggingMode::Default;  ///< for the sensors pipeline
   std::string exact = "bullet";  ///< the sensors' exact test: bullet, robust or continuous (psc::bullet::ExactTest)
+  /// Self-collision on every body of our pipelines (psc::bullet::Settings::self_collision), and the
+  /// self truth for every pipeline. Bullet's own pipeline has none and stays as it is.
+  bool self_collision = false;
 };
 
 /// Everything a run measured, summarised from its per-step records. Fields that do not apply are
@@ -69,6 +72,7 @@ struct RunResult {
   Pipeline pipeline = Pipeline::Bullet;
   std::string flagging;           ///< ours: "default", "thesis" or "bounds"; empty for Bullet's
   std::string exact = "bullet";   ///< exact test of the run (Bullet's own pipeline: always bullet)
+  bool self_collision = false;    ///< RunOptions::self_collision (the pipeline itself: ours only)
   bool has_strict = false, has_full = false;
   double recall_strict = 1.0, recall_full = 1.0;
   double recall_strict_worst_step = 1.0, recall_full_worst_step = 1.0;
@@ -107,6 +111,16 @@ struct RunResult {
   /// Edge–triangle crossings between bodies after a step (StepCounts::edge_crossings): the most in
   /// one step, and the steps with any.
   std::size_t intersections_max = 0, intersections_steps = 0;
+  /// The same within one body, between an edge and a triangle that share no vertex
+  /// (StepCounts::self_edge_crossings): a surface passing through itself.
+  std::size_t self_intersections_max = 0, self_intersections_steps = 0;
+  /// Self truth (RunOptions::self_collision with a strict truth): found self contacts inside the
+  /// strict self truth over it, over the run, on triangles CollideVF_SS accepts; found self
+  /// contacts outside the full self truth (with a full truth).
+  bool has_self_truth = false;
+  double self_recall_strict = 1.0;
+  std::size_t self_truth_strict_total = 0, self_found_in_strict = 0, self_contacts_outside_truth = 0;
+  std::size_t self_contacts_found_total = 0;
   /// Steps with a body pair over the plugin's runaway rule (psc::bullet::runawayContacts: bodies
   /// inside each other or too fast for the contact radius), and the first such warning.
   std::size_t runaway_steps = 0;

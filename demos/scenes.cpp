@@ -331,6 +331,83 @@ Scene fastCloth(const SceneParams& p) {
   return s;
 }
 
+Scene clothFold(const SceneParams& p) {
+  // The cloth lands across a thin bar a little off its middle: the halves swing down on both sides
+  // and meet under the bar, the longer half drags the cloth off, and it lands folded on the ground.
+  // Without self-collision the halves pass through each other where they meet.
+  Scene s;
+  s.title = "a cloth dropped across a thin bar: its halves swing together and it falls folded";
+  s.gravity = {0, -kGravity, 0};
+  s.dt = kPileStep;
+  s.statics.push_back(ground());
+  s.statics.push_back({Vec3(0, 1.6, 0), Vec3(0.04, 0.04, 2.5)});
+  s.bodies.push_back(cloth("cloth", flatPatch(3.0, p.resolution).translate({0.35, 1.8, 0.02})));
+  return s;
+}
+
+/// A closed tube of radius r around the helix (R cos θ, pitch·θ/2π, R sin θ), θ in [0, 2π·turns],
+/// with about n vertices: rings of m vertices about as far apart along the tube as around it, and a
+/// fan closing each end. Rings are placed in the frame (radial, radial × tangent) of the helix, so
+/// every triangle is wound outward (positive volume).
+TriMesh helixTube(double R, double pitch, double turns, double r, std::size_t n) {
+  const double rise = pitch / (2 * kPi);
+  const double length = 2 * kPi * turns * std::sqrt(R * R + rise * rise);
+  const auto m = static_cast<std::size_t>(
+      std::max(6.0, std::round(std::sqrt(static_cast<double>(n) * 2 * kPi * r / length))));
+  const std::size_t rings = std::max<std::size_t>(2, (std::max<std::size_t>(n, 2 * m + 2) - 2) / m);
+  TriMesh t;
+  for (std::size_t i = 0; i < rings; ++i) {
+    const double th = 2 * kPi * turns * static_cast<double>(i) / static_cast<double>(rings - 1);
+    const Vec3 c(R * std::cos(th), rise * th, R * std::sin(th));
+    const Vec3 tangent = Vec3(-R * std::sin(th), rise, R * std::cos(th)).normalized();
+    const Vec3 radial(std::cos(th), 0, std::sin(th));
+    const Vec3 side = radial.cross(tangent);
+    for (std::size_t j = 0; j < m; ++j) {
+      const double phi = 2 * kPi * static_cast<double>(j) / static_cast<double>(m);
+      t.vertices.push_back(c + r * (std::cos(phi) * radial + std::sin(phi) * side));
+    }
+  }
+  const auto at = [&](std::size_t i, std::size_t j) { return static_cast<Index>(i * m + j % m); };
+  for (std::size_t i = 0; i + 1 < rings; ++i)
+    for (std::size_t j = 0; j < m; ++j) {
+      t.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+      t.triangles.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+    }
+  // End caps: a centre vertex each, fans facing back along the tube at the start, forward at the end.
+  const auto cap = [&](std::size_t ring, bool start) {
+    Vec3 centre = Vec3::Zero();
+    for (std::size_t j = 0; j < m; ++j) centre += t.vertices[at(ring, j)];
+    t.vertices.push_back(centre / static_cast<double>(m));
+    const auto c = static_cast<Index>(t.vertices.size() - 1);
+    for (std::size_t j = 0; j < m; ++j) {
+      if (start)
+        t.triangles.push_back({c, at(ring, j), at(ring, j + 1)});
+      else
+        t.triangles.push_back({c, at(ring, j + 1), at(ring, j)});
+    }
+  };
+  cap(0, true);
+  cap(rings - 1, false);
+  return t;
+}
+
+Scene tubeCoil(const SceneParams& p) {
+  // A loose helix of soft tube, its axis leaning, dropped on the ground: each coil lands on and
+  // across the one below it. The coils start 0.3 apart (the rest shape is the initial shape, so
+  // what touches at rest would never count as a self contact).
+  Scene s;
+  s.title = "a long soft tube in a loose helix dropped onto the ground, coiling onto itself";
+  s.gravity = {0, -kGravity, 0};
+  s.dt = kPileStep;
+  s.statics.push_back(ground());
+  TriMesh t = helixTube(0.9, 0.6, 3.0, 0.15, p.resolution);
+  t.rotate(Vec3::UnitX(), 0.35);
+  const Box b = boundsOf(t);
+  t.translate({-0.5 * (b.lo.x() + b.hi.x()), 0.3 - b.lo.y(), -0.5 * (b.lo.z() + b.hi.z())});
+  s.bodies.push_back(ball("tube", std::move(t)));
+  return s;
+}
+
 Scene meshDrop(const SceneParams& p, std::size_t k) {
   Scene s;
   std::string path = p.mesh_file;
@@ -394,6 +471,10 @@ const std::vector<SceneInfo>& sceneCatalog() {
       {"mesh", "8", "a mesh file (--mesh) as soft bodies dropped onto copies of itself", true, 3, 150},
       {"projectile", "9", "a small soft sphere at 30 units/s into a large soft block (tunnelling)", false, 2, 60},
       {"fast_cloth", "10", "a soft ball at 20 units/s into a pinned cloth (tunnelling)", false, 2, 60},
+      {"cloth_fold", "11", "a cloth dropped across a thin bar, falling folded onto itself (self-collision)", false, 1,
+       180},
+      {"tube_coil", "12", "a long soft tube in a loose helix coiling onto itself on the ground (self-collision)", false,
+       1, 180},
   };
   return catalog;
 }
@@ -425,6 +506,8 @@ Scene makeScene(const std::string& key, const SceneParams& p) {
   else if (n == "fast_impact") s = fastImpact(p);
   else if (n == "projectile") s = projectile(p);
   else if (n == "fast_cloth") s = fastCloth(p);
+  else if (n == "cloth_fold") s = clothFold(p);
+  else if (n == "tube_coil") s = tubeCoil(p);
   else s = meshDrop(p, bodyCount(p, *info));
   s.name = n;
   s.default_steps = info->default_steps;

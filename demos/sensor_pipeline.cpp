@@ -23,10 +23,12 @@ bool SensorPipeline::available() { return true; }
 
 int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
 
-SensorPipeline::SensorPipeline(SceneWorld& world, psc::Flagging flagging, const std::string& exact) {
+SensorPipeline::SensorPipeline(SceneWorld& world, psc::Flagging flagging, const std::string& exact,
+                               bool self_collision) {
   psc::bullet::Settings settings;
   settings.opt_in = psc::bullet::OptIn::Explicit;
   settings.sensors.flagging = flagging;
+  settings.self_collision = self_collision;
   settings.exact = psc::bullet::exactTestFromString(exact);
   impl_ = std::make_shared<Impl>(world, psc::bullet::install(world.world(), settings));
   for (btSoftBody* body : world.softBodies()) impl_->plugin.setEnabled(body, true);
@@ -116,7 +118,7 @@ SensorView SensorPipeline::view() const {
 struct SensorPipeline::Impl {};
 bool SensorPipeline::available() { return false; }
 int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
-SensorPipeline::SensorPipeline(SceneWorld&, psc::Flagging, const std::string&) {
+SensorPipeline::SensorPipeline(SceneWorld&, psc::Flagging, const std::string&, bool) {
   throw Error(ErrorCode::InvalidArgument, "this psc_demo was built without psc::bullet: use --pipeline bullet");
 }
 SensorPipeline::~SensorPipeline() = default;

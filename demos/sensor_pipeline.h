@@ -35,9 +35,10 @@ class SensorPipeline {
   /// `flagging` goes to Settings::sensors.flagging: SensorsAndBounds (the default), Bounds (the
   /// ablation: boxes only) or Sensors (the thesis's flag-only mode). `exact`: the plugin's exact
   /// test, "bullet", "robust" or "continuous" (psc::bullet::ExactTest); anything else throws
-  /// psc::Error(InvalidArgument).
+  /// psc::Error(InvalidArgument). `self_collision`: Settings::self_collision, every body against
+  /// itself too (its rest shape: its positions at the plugin's first step).
   explicit SensorPipeline(SceneWorld& world, psc::Flagging flagging = psc::Flagging::SensorsAndBounds,
-                          const std::string& exact = "bullet");
+                          const std::string& exact = "bullet", bool self_collision = false);
   ~SensorPipeline();
 
   /// Adds the plugin's figures of the step that just ended to `record` (times and counts stay 0

@@ -57,10 +57,18 @@ struct StepCounts {
   std::size_t truth_ambiguous = 0;                       ///< truth contacts in the rounding band
   std::size_t truth_strict_untestable = 0;               ///< strict truth on triangles CollideVF_SS refuses
   std::size_t found_in_strict_untestable = 0;            ///< found contacts of those (Robust, Continuous)
+  // Self-collision, against the self truth (only with RunOptions::self_collision): a body's own
+  // (vertex, triangle) pairs the exclusion rule leaves in (ground_truth.h, GroundTruth::computeSelf).
+  std::size_t self_contacts_found = 0;                   ///< distinct soft-soft contacts of a body with itself
+  /// Strict self truth and found self contacts inside it, both only on triangles CollideVF_SS
+  /// accepts (|cross|² > SIMD_EPSILON).
+  std::size_t self_truth_strict = 0, self_found_in_strict = 0;
+  std::size_t self_outside_truth = 0;                    ///< found self contacts outside the full self truth
   // After the step.
   std::size_t penetrating_vertices = 0;                  ///< inside another closed body beyond the margins
   std::size_t runaway_pairs = 0;                         ///< body pairs over the runaway rule (runner.cpp)
   std::size_t edge_crossings = 0;                        ///< (edge, triangle) crossings between bodies (crossings.h)
+  std::size_t self_edge_crossings = 0;                   ///< (edge, triangle) crossings within one body, no shared vertex
   /// Vertices whose path over the step passed through a moving triangle of another body, of those
   /// that had no soft-soft contact in the step (crossings.h).
   std::size_t tunnelled_vertices = 0;

@@ -51,6 +51,13 @@ std::string summary(const RunResult& r) {
   s += ", crossings max " + std::to_string(r.intersections_max) + " (" + std::to_string(r.intersections_steps) +
        " steps), tunnelled " + std::to_string(r.tunnelled_total) + " (worst step " +
        std::to_string(r.tunnelled_worst_step) + ")";
+  s += ", self-crossings max " + std::to_string(r.self_intersections_max) + " (" +
+       std::to_string(r.self_intersections_steps) + " steps)";
+  if (r.has_self_truth) {
+    s += ", self strict " + fmt("%.4f", r.self_recall_strict) + " of " + std::to_string(r.self_truth_strict_total) +
+         ", " + std::to_string(r.self_contacts_found_total) + " self contacts";
+    if (r.has_full) s += " (" + std::to_string(r.self_contacts_outside_truth) + " outside)";
+  }
   if (r.runaway_steps)
     s += ", RUNAWAY in " + std::to_string(r.runaway_steps) + " steps (first: " + r.runaway_warning + ")";
   if (r.diverged_at_step >= 0) s += ", DIVERGED after step " + std::to_string(r.diverged_at_step);
@@ -81,6 +88,7 @@ std::vector<Job> defaultSuite() {
     Job j;
     j.scene = info.name;
     j.params.resolution = 1000;
+    j.self_collision = info.name == "cloth_fold" || info.name == "tube_coil";
     jobs.push_back(j);
   }
   for (std::size_t res : {500, 1000, 2000, 4000}) {
@@ -138,6 +146,7 @@ int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ost
       for (Pipeline p : options.pipelines) {
         RunOptions ro = options.run;
         ro.steps = steps;
+        ro.self_collision = ro.self_collision || job.self_collision;
         if (job.warmup) ro.warmup = job.warmup;
         if (!ro.frames_dir.empty())
           ro.frames_name = scene.name + "_" + std::to_string(scene.resolution()) + "v_" +

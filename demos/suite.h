@@ -18,6 +18,7 @@ struct Job {
   std::size_t steps = 0;            ///< 0 = the scene's default
   std::string series = "scenes";    ///< "scenes", "sweep_resolution" or "sweep_bodies"
   std::size_t warmup = 0;           ///< steps left out of the timing; 0 = RunOptions' rule
+  bool self_collision = false;      ///< RunOptions::self_collision for this job (or the suite's)
 };
 
 struct SuiteOptions {
@@ -27,7 +28,7 @@ struct SuiteOptions {
 };
 
 /// The default suite (psc_demo without arguments): every scene at 1000 vertices per body with its
-/// default steps, then a resolution sweep of the tori pile (8 bodies, 500-4000 vertices per body,
+/// default steps (the self-collision scenes, cloth_fold and tube_coil, with self-collision on), then a resolution sweep of the tori pile (8 bodies, 500-4000 vertices per body,
 /// 100 steps timed from step 40 on, when the pile is in contact) for the time-vs-size plot; all
 /// three pipelines (sensors, bounds, bullet) run every job.
 std::vector<Job> defaultSuite();

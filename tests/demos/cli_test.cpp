@@ -91,6 +91,10 @@ TEST(DemoCli, JsonAndCsvHaveTheAgreedKeys) {
     EXPECT_LE(tunnelled.at("worst_step").get<long>(), tunnelled.at("total").get<long>()) << pipeline;
     EXPECT_EQ(tunnelled.at("worst_step").get<long>() > 0, tunnelled.at("total").get<long>() > 0) << pipeline;
     EXPECT_GE(num(r, "crossings_ms_mean"), 0.0) << pipeline;
+    // Self crossings are counted whatever the options; the self truth only with --self-collision.
+    EXPECT_EQ(r.at("self_intersections_max").get<int>() > 0, r.at("self_intersections_steps").get<int>() > 0);
+    EXPECT_FALSE(r.at("self_collision").get<bool>()) << pipeline;
+    EXPECT_FALSE(r.contains("self_recall_strict")) << pipeline;
     if (ours) {
       EXPECT_EQ(r.at("flagging").get<std::string>(), pipeline == "sensors" ? "default" : "bounds");
     }
@@ -157,6 +161,35 @@ TEST(DemoCli, JsonAndCsvHaveTheAgreedKeys) {
   ASSERT_EQ(rows.size(), expected.size());
   for (std::size_t i = 0; i < rows.size(); ++i)  // pipeline is the fifth column
     EXPECT_NE(rows[i].find(",\"" + expected[i] + "\","), std::string::npos) << rows[i];
+}
+
+TEST(DemoCli, SelfCollisionRunsHaveTheSelfKeys) {
+  // tube_coil's coils meet from about step 50: our pipeline with self-collision, Bullet's without.
+  const fs::path dir = scratch("self");
+  const Outcome o = run("--scene tube_coil --resolution 300 --steps 100 --pipeline both --self-collision --json " +
+                        (dir / "r.json").string() + " --csv " + (dir / "r.csv").string());
+  ASSERT_TRUE(o.exited && o.code == 0) << o.output;
+  EXPECT_NE(o.output.find("self-crossings max "), std::string::npos) << o.output;
+  EXPECT_NE(o.output.find("self strict "), std::string::npos) << o.output;
+  for (const nlohmann::json& r : readJson(dir / "r.json")["runs"]) {
+    const std::string pipeline = r.at("pipeline").get<std::string>();
+    EXPECT_EQ(r.at("self_collision").get<bool>(), pipeline != "bullet") << pipeline;
+    for (const char* key : {"self_intersections_max", "self_intersections_steps", "self_recall_strict",
+                            "truth_self_strict_contacts", "self_contacts_found", "self_contacts_outside_truth"})
+      EXPECT_TRUE(r.contains(key)) << pipeline << " run lacks '" << key << "'";
+    EXPECT_GT(r.at("truth_self_strict_contacts").get<long>(), 0) << pipeline;
+    EXPECT_EQ(r.at("self_contacts_outside_truth").get<long>(), 0) << pipeline;
+    if (pipeline == "bullet") {
+      EXPECT_EQ(r.at("self_contacts_found").get<long>(), 0);
+    } else {
+      EXPECT_EQ(num(r, "self_recall_strict"), 1.0);
+    }
+  }
+  std::ifstream csv(dir / "r.csv");
+  std::string header;
+  std::getline(csv, header);
+  EXPECT_NE(header.find(",self_intersections_max,"), std::string::npos) << header;
+  EXPECT_NE(header.find(",self_recall_strict,"), std::string::npos) << header;
 }
 
 TEST(DemoCli, PipelineAndFlaggingChoices) {

@@ -68,6 +68,32 @@ TEST(Count, TwoTrianglesPassingThroughEachOtherCrossTwice) {
   const std::vector<CrossingMesh> one = {crossingMesh({{0, 1, 2}, {3, 4, 5}})};
   const BodyPositions both = {{kA, kB, kC, {0.2, 0.2, -1}, {0.2, 0.2, 1}, {0.2, 3, 0}}};
   EXPECT_EQ(counter.edgeCrossings(one, both), 0u);
+  // They are self crossings, counted separately.
+  EXPECT_EQ(counter.selfEdgeCrossings(one, both), 2u);
+  EXPECT_EQ(selfEdgeCrossingsBruteForce(one, both), 2u);
+  EXPECT_EQ(counter.selfEdgeCrossings(meshes, x), 0u);
+}
+
+TEST(Count, SelfCrossingsLeaveOutEdgesOfTheTriangleAndItsNeighbours) {
+  // Triangle 1 shares vertex 0 with triangle 0 and its edges (0, 4) and (0, 3) pass through it at
+  // vertex 0 only: an edge with a vertex of the triangle is never a self crossing. Its edge (3, 4)
+  // does pass through triangle 0's inside.
+  const std::vector<CrossingMesh> one = {crossingMesh({{0, 1, 2}, {0, 3, 4}})};
+  const BodyPositions x = {{kA, {2, 0, 0}, {0, 2, 0}, {0.5, 0.5, -1}, {0.5, 0.5, 1}}};
+  CrossingCounter counter;
+  EXPECT_EQ(counter.selfEdgeCrossings(one, x), 1u);
+  EXPECT_EQ(selfEdgeCrossingsBruteForce(one, x), 1u);
+  // A flat patch has none.
+  std::vector<Vec3> flat;
+  std::vector<Triangle> tris;
+  for (int i = 0; i <= 4; ++i)
+    for (int j = 0; j <= 4; ++j) flat.emplace_back(i, j, 0);
+  for (Index i = 0; i < 4; ++i)
+    for (Index j = 0; j < 4; ++j) {
+      tris.push_back({i * 5 + j, i * 5 + j + 5, i * 5 + j + 6});
+      tris.push_back({i * 5 + j, i * 5 + j + 6, i * 5 + j + 1});
+    }
+  EXPECT_EQ(counter.selfEdgeCrossings({crossingMesh(tris)}, {flat}), 0u);
 }
 
 TEST(Tunnel, VertexThroughAStaticTriangleTunnels) {
@@ -222,6 +248,40 @@ TEST(Grid, EqualsBruteForceOnRandomMeshes) {
   EXPECT_GT(crossings_seen, 100u);
   EXPECT_GT(tunnelled_seen, 50u);
   EXPECT_GE(empty_cases, 8u);
+}
+
+/// The bodies of `r` as one body (their vertices renumbered one after another), at `x`.
+std::pair<std::vector<CrossingMesh>, BodyPositions> asOneBody(const RandomBodies& r, const BodyPositions& x) {
+  std::vector<Triangle> tris;
+  std::vector<Vec3> all;
+  for (std::size_t b = 0; b < r.meshes.size(); ++b) {
+    const auto offset = static_cast<Index>(all.size());
+    for (Triangle t : r.meshes[b].triangles) {
+      for (Index& v : t) v += offset;
+      tris.push_back(t);
+    }
+    all.insert(all.end(), x[b].begin(), x[b].end());
+  }
+  return {{crossingMesh(std::move(tris))}, {std::move(all)}};
+}
+
+TEST(Grid, SelfCrossingsEqualBruteForceOnRandomMeshes) {
+  CrossingCounter counter;
+  std::size_t seen = 0;
+  for (std::uint64_t seed = 1; seed <= 12; ++seed) {
+    const RandomBodies r = randomBodies(seed, 2 + int(seed % 3), seed % 4 == 0 ? 20.0 : 0.3, 0.1);
+    const std::string what = "seed " + std::to_string(seed);
+    // Each patch alone, several per call: a bumpy patch may fold through itself.
+    EXPECT_EQ(counter.selfEdgeCrossings(r.meshes, r.after), selfEdgeCrossingsBruteForce(r.meshes, r.after)) << what;
+    // All patches as one body: their crossings between each other are now self crossings.
+    const auto [meshes, x] = asOneBody(r, r.after);
+    const std::size_t brute = selfEdgeCrossingsBruteForce(meshes, x);
+    EXPECT_EQ(counter.selfEdgeCrossings(meshes, x), brute) << what;
+    EXPECT_EQ(brute, edgeCrossingsBruteForce(r.meshes, r.after) + selfEdgeCrossingsBruteForce(r.meshes, r.after))
+        << what;
+    seen += brute;
+  }
+  EXPECT_GT(seen, 100u);
 }
 
 TEST(Grid, EqualsBruteForceOnTwoSpheresPushedTogether) {

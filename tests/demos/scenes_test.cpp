@@ -1,5 +1,6 @@
 // Every scene builds and runs a few steps with both pipelines; scene definitions are deterministic
 // and honour their parameters; a longer head-on run checks the measurement chain end to end.
+#include "crossings.h"
 #include "ground_truth.h"
 #include "psc/error.h"
 #include "runner.h"
@@ -10,6 +11,7 @@
 
 #include <BulletCollision/BroadphaseCollision/btDbvt.h>
 
+#include <cmath>
 #include <cstdio>
 
 namespace psc::demo {
@@ -59,7 +61,7 @@ TEST_P(EveryScene, BuildsAndRunsAFewStepsWithEveryPipeline) {
   p.resolution = 80;
   p.bodies = 3;
   const Scene scene = makeScene(GetParam(), p);
-  ASSERT_GE(scene.bodies.size(), 2u);
+  ASSERT_GE(scene.bodies.size(), 1u);  // one in the self-collision scenes
   for (const SoftBodySpec& b : scene.bodies) {
     EXPECT_FALSE(b.mesh.triangles.empty()) << b.name;
     for (const Vec3& v : b.mesh.vertices) ASSERT_TRUE(v.allFinite()) << b.name;
@@ -106,6 +108,14 @@ TEST_P(EveryScene, StartsWithBodiesApart) {
     EXPECT_EQ(measurePenetration(bodies, grid).vertices, 0u) << res;
     GroundTruth truth;
     EXPECT_EQ(truth.compute(bodies, {}).strict_inside, 0u) << res;
+    // The self-collision scenes start with no body passing through itself either. (Not every
+    // scene does: Wuson.ply crosses itself as loaded.)
+    if (GetParam() != "cloth_fold" && GetParam() != "tube_coil") continue;
+    std::vector<CrossingMesh> meshes;
+    BodyPositions x;
+    for (const SoftBodySpec& b : scene.bodies) meshes.push_back(crossingMesh(b.mesh.triangles)), x.push_back(b.mesh.vertices);
+    CrossingCounter counter;
+    EXPECT_EQ(counter.selfEdgeCrossings(meshes, x), 0u) << res;
   }
 }
 
@@ -113,9 +123,9 @@ INSTANTIATE_TEST_SUITE_P(Catalog, EveryScene, ::testing::ValuesIn(sceneNames()),
                          [](const ::testing::TestParamInfo<std::string>& param_info) { return param_info.param; });
 
 TEST(Scenes, CatalogFollowsTheBenchmarkNumbering) {
-  EXPECT_EQ(sceneCatalog().size(), 11u);
-  for (const char* key : {"1", "2", "2a", "2b", "3", "4", "5", "6", "7", "8", "9", "10", "head_on", "mesh", "projectile",
-                          "fast_cloth"})
+  EXPECT_EQ(sceneCatalog().size(), 13u);
+  for (const char* key : {"1", "2", "2a", "2b", "3", "4", "5", "6", "7", "8", "9", "10", "11", "12", "head_on", "mesh",
+                          "projectile", "fast_cloth", "cloth_fold", "tube_coil"})
     EXPECT_NE(findScene(key), nullptr) << key;
   try {
     makeScene("nonsense", {});
@@ -138,6 +148,59 @@ TEST(Scenes, FastClothIsPinnedAtItsFourCorners) {
     EXPECT_TRUE(x == lo_x || x == hi_x) << "pinned vertex " << v << " is not on the cloth's border";
   }
   EXPECT_LT(s.bodies[1].velocity.y(), -10.0) << "the ball is fast";
+}
+
+TEST(Scenes, TubeCoilIsAClosedOutwardTubeOfAboutTheResolution) {
+  for (std::size_t res : {300, 1000, 4000}) {
+    SceneParams p;
+    p.resolution = res;
+    const Scene s = makeScene("tube_coil", p);
+    ASSERT_EQ(s.bodies.size(), 1u);
+    const TriMesh& m = s.bodies[0].mesh;
+    EXPECT_TRUE(s.bodies[0].closed) << res;
+    EXPECT_NEAR(double(m.vertices.size()), double(res), 0.1 * double(res)) << res;
+    double volume = 0;  // positive when every triangle is wound outward
+    for (const Triangle& t : m.triangles) volume += m.vertices[t[0]].dot(m.vertices[t[1]].cross(m.vertices[t[2]])) / 6.0;
+    // A round tube of radius 0.15 along 3 turns of a helix of radius 0.9 and pitch 0.6; the rings
+    // are polygons of at least 6 sides (83% of the circle's area), their centres on the helix.
+    const double pi = 3.14159265358979, rise = 0.6 / (2 * pi);
+    const double round = pi * 0.15 * 0.15 * 3 * 2 * pi * std::sqrt(0.9 * 0.9 + rise * rise);
+    EXPECT_GT(volume, 0.75 * round) << res;
+    EXPECT_LT(volume, round) << res;
+    EXPECT_EQ(makeScene("tube_coil", p).bodies[0].mesh.vertices, m.vertices) << "deterministic";
+  }
+  const Scene cloth = makeScene("cloth_fold", {});
+  ASSERT_EQ(cloth.bodies.size(), 1u);
+  EXPECT_NEAR(double(cloth.resolution()), 1000.0, 100.0);
+}
+
+TEST(Scenes, SelfCollisionOnClothFold) {
+  // Our pipeline with self-collision finds every self contact of the strict self truth Bullet's
+  // test can accept, none outside it, and the cloth never passes through itself; Bullet's own
+  // pipeline (no self-collision) finds none and its cloth does pass through itself.
+  if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
+  const Scene scene = makeScene("cloth_fold", {});
+  RunOptions o;
+  o.self_collision = true;
+  for (Pipeline pipeline : {Pipeline::Sensors, Pipeline::Bullet}) {
+    const RunResult r = runPipeline(scene, pipeline, o);
+    std::printf("cloth_fold %s: self strict %.4f of %zu, %zu self contacts (%zu outside), self crossings max %zu\n",
+                toString(pipeline), r.self_recall_strict, r.self_truth_strict_total, r.self_contacts_found_total,
+                r.self_contacts_outside_truth, r.self_intersections_max);
+    EXPECT_TRUE(r.has_self_truth);
+    EXPECT_GT(r.self_truth_strict_total, 0u) << toString(pipeline);
+    if (pipeline == Pipeline::Sensors) {
+      EXPECT_TRUE(r.self_collision);
+      EXPECT_EQ(r.self_recall_strict, 1.0);
+      EXPECT_EQ(r.self_contacts_outside_truth, 0u) << "the same exclusion and rest shape as the plugin";
+      EXPECT_EQ(r.self_intersections_max, 0u);
+    } else {
+      EXPECT_FALSE(r.self_collision);
+      EXPECT_EQ(r.self_contacts_found_total, 0u);
+      EXPECT_EQ(r.self_recall_strict, 0.0);
+      EXPECT_GT(r.self_intersections_max, 0u);
+    }
+  }
 }
 
 TEST(Scenes, DeterministicAndHonourTheirParameters) {

@@ -3,6 +3,7 @@
 // exact distance itself is psc::testkit's, tested in tests/testkit_test.cpp.
 #include "bullet_scene.h"
 #include "ground_truth.h"
+#include "psc/testkit/reference.h"
 #include "scenes.h"
 
 #include <gtest/gtest.h>
@@ -125,6 +126,97 @@ TEST(TruthGrid, EqualsBruteForceOnSceneStates) {
     strict_total += brute.strict_inside;
   }
   EXPECT_GT(strict_total, 20u) << "the scene states should be in contact";
+}
+
+/// Rest shapes for `bodies`: the positions moved by up to `shift` per vertex, so that some pairs
+/// within the radius now were close at rest (excluded) and some were not.
+std::vector<std::vector<Vec3>> restOf(const std::vector<TruthBody>& bodies, std::uint64_t seed, double shift) {
+  std::mt19937_64 rng(seed);
+  std::vector<std::vector<Vec3>> rest;
+  for (const TruthBody& b : bodies) {
+    rest.push_back(b.x);
+    for (Vec3& p : rest.back()) p += randomVec(rng, -shift, shift);
+  }
+  return rest;
+}
+
+TEST(SelfTruth, GridEqualsBruteForceOnRandomSoups) {
+  GroundTruth truth;
+  std::size_t strict_seen = 0, excluded_seen = 0;
+  for (std::uint64_t seed = 1; seed <= 8; ++seed) {
+    // Fewer bodies, more triangles each: a body's own triangles overlap.
+    const auto bodies = randomSoup(seed, 1 + int(seed % 2), 120);
+    const auto rest = restOf(bodies, seed, 0.1);
+    for (int mode = 0; mode < 3; ++mode) {
+      TruthSettings s;
+      s.strict = mode != 2;
+      s.full = mode != 1;
+      s.band_absolute = seed % 2 ? 0.0 : 2e-3;
+      const TruthResult brute = groundTruthSelfBruteForce(bodies, rest, 2.0, s);
+      const std::string what = "seed " + std::to_string(seed) + " mode " + std::to_string(mode);
+      expectSame(truth.computeSelf(bodies, rest, 2.0, s), brute, what);
+      for (const TruthContact& c : brute.contacts) ASSERT_EQ(c.key.vertex_body, c.key.triangle_body) << what;
+      if (mode == 0) {
+        strict_seen += brute.strict_inside;
+        // The same without exclusion at rest (a rest shape far apart): what the rule took out.
+        auto apart = rest;
+        for (auto& body : apart)
+          for (std::size_t v = 0; v < body.size(); ++v) body[v] *= 1e3 * double(v + 1);
+        excluded_seen += groundTruthSelfBruteForce(bodies, apart, 2.0, s).strict_inside - brute.strict_inside;
+      }
+    }
+  }
+  EXPECT_GT(strict_seen, 100u);
+  EXPECT_GT(excluded_seen, 10u);
+}
+
+TEST(SelfTruth, FoldedClothAgainstBruteForceAndTheInitialShapeAsRest) {
+  // cloth_fold (Bullet's pipeline: no self-collision) with the scene's initial mesh as rest shape,
+  // at the step its halves touch most.
+  const Scene scene = makeScene("cloth_fold", SceneParams{});
+  const std::vector<std::vector<Vec3>> rest = {scene.bodies[0].mesh.vertices};
+  TruthSettings s;
+  s.band_absolute = 1e-6;
+  GroundTruth truth;
+  SceneWorld sw(scene);
+  std::vector<TruthBody> bodies, most;
+  std::size_t first_step_contacts = 0, most_strict = 0;
+  int step = 0;
+  sw.world().after_collision = [&] {
+    bodies = bodiesOf(sw);
+    const TruthResult& r = truth.computeSelf(bodies, rest, 2.0, s);
+    if (step == 0) first_step_contacts = r.contacts.size();
+    if (r.strict_inside > most_strict) most_strict = r.strict_inside, most = bodies;
+  };
+  for (; step < 180; ++step) sw.step();
+  // The flat cloth at its first step touches itself nowhere the rule leaves in.
+  EXPECT_EQ(first_step_contacts, 0u);
+  ASSERT_GT(most_strict, 20u) << "the folded cloth should touch itself";
+  const TruthResult brute = groundTruthSelfBruteForce(most, rest, 2.0, s);
+  expectSame(truth.computeSelf(most, rest, 2.0, s), brute, "cloth_fold");
+}
+
+TEST(SelfTruth, TheInitialMeshExcludesWhatThePluginsFirstStepExcludes) {
+  // The plugin takes its rest shape at its first step (m_x after the first predictMotion); the self
+  // truth takes the scene's initial mesh. Every pair of the self scenes is excluded by both or by
+  // neither.
+  for (const char* name : {"cloth_fold", "tube_coil"}) {
+    const Scene scene = makeScene(name, SceneParams{});
+    SceneWorld sw(scene);
+    std::vector<TruthBody> bodies;
+    sw.world().after_collision = [&] { bodies = bodiesOf(sw); };
+    sw.step();
+    const std::vector<Vec3>& initial = scene.bodies[0].mesh.vertices;
+    const TruthBody& first = bodies.at(0);
+    std::size_t excluded = 0;
+    for (Index v = 0; v < initial.size(); ++v)
+      for (const Triangle& t : first.triangles) {
+        const bool by_initial = testkit::selfPairExcluded(v, t, initial, first.margin, 2.0);
+        ASSERT_EQ(by_initial, testkit::selfPairExcluded(v, t, first.x, first.margin, 2.0)) << name << " vertex " << v;
+        excluded += by_initial;
+      }
+    EXPECT_GT(excluded, 3 * initial.size()) << name << ": the rule excludes every vertex's own neighbourhood";
+  }
 }
 
 TEST(TruthInside, BoxWithRaysAlongEdgesAndVertices) {

@@ -47,6 +47,12 @@ void forEachContact(const std::vector<Vec3>& points, const std::vector<Vec3>& co
   forEachContact(points, corners, triangles, radius, [](Index, Index) { return false; }, f);
 }
 
+/// The self-collision exclusion rule (psc::SensorWorld::setSelfCollision), written apart from the
+/// core: vertex v and triangle t of one body are never a self contact when t holds v, or when v was
+/// closer to t than rest_exclusion × (2 × margin) in the body's rest shape `rest` (what touches at
+/// rest is the surface itself, not a fold).
+bool selfPairExcluded(Index v, const Triangle& t, const std::vector<Vec3>& rest, double margin, double rest_exclusion);
+
 /// (vertex of `vm`, triangle of `tm`) pairs closer than `radius`, in that order.
 std::vector<std::pair<Index, Index>> bruteContacts(const TriMesh& vm, const TriMesh& tm, double radius);
 
