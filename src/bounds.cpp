@@ -45,6 +45,13 @@ bool inside(const Vec3& x, const Vec3& lo, const Vec3& hi, double r) {
   return (x.array() >= lo.array() - r).all() && (x.array() <= hi.array() + r).all();
 }
 
+/// The ball of radius r about x meets the box: tighter than inside() at the box's edges and
+/// corners, where a cube of half-side r reaches further than the ball.
+bool ballMeetsBox(const Vec3& x, const Vec3& lo, const Vec3& hi, double r) {
+  const Vec3 d = (lo - x).cwiseMax(x - hi).cwiseMax(Vec3::Zero());
+  return d.squaredNorm() <= r * r;
+}
+
 /// Axis along which the box is longest: the sweep axis that separates the most.
 int longestAxis(const Vec3& lo, const Vec3& hi) {
   Eigen::Index axis = 0;
@@ -420,7 +427,7 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       const TriangleRec& tr = s.tris[k];
       ++ctx.counters.candidate_probes;
       if (sensors && (vr.xn + vr.r < tr.nlo || vr.xn - vr.r > tr.nhi)) continue;
-      if (!inside(vr.x, tr.lo, tr.hi, vr.r)) continue;
+      if (!ballMeetsBox(vr.x, tr.lo, tr.hi, vr.r)) continue;
       if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, tr.t, vr.r)) {
         ++ctx.counters.self_excluded_pairs;
         continue;
