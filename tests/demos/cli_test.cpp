@@ -171,7 +171,8 @@ TEST(DemoCli, SelfCollisionRunsHaveTheSelfKeys) {
   ASSERT_TRUE(o.exited && o.code == 0) << o.output;
   EXPECT_NE(o.output.find("self-crossings max "), std::string::npos) << o.output;
   EXPECT_NE(o.output.find("self strict "), std::string::npos) << o.output;
-  for (const nlohmann::json& r : readJson(dir / "r.json")["runs"]) {
+  const nlohmann::json report = readJson(dir / "r.json");  // range-for over a temporary's member would dangle
+  for (const nlohmann::json& r : report.at("runs")) {
     const std::string pipeline = r.at("pipeline").get<std::string>();
     EXPECT_EQ(r.at("self_collision").get<bool>(), pipeline != "bullet") << pipeline;
     for (const char* key : {"self_intersections_max", "self_intersections_steps", "self_recall_strict",
