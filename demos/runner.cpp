@@ -98,12 +98,13 @@ std::size_t runawayPairs(SceneWorld& sw, const std::vector<ContactKey>& found, s
     ++per_pair[{std::min(k.vertex_body, k.triangle_body), std::max(k.vertex_body, k.triangle_body)}];
   std::size_t runaways = 0;
   for (const auto& [pair, contacts] : per_pair) {
-    const double limit = psc::bullet::runawayContacts(*sw.softBodies()[pair.first], *sw.softBodies()[pair.second]);
-    if (double(contacts) <= limit) continue;
+    const btSoftBody& a = *sw.softBodies()[pair.first];
+    const btSoftBody& b = *sw.softBodies()[pair.second];
+    if (!psc::bullet::isRunaway(a, b, contacts)) continue;
     if (++runaways == 1)
       warning = "runaway contact between bodies " + std::to_string(pair.first) + " and " + std::to_string(pair.second) +
                 ": " + std::to_string(contacts) + " contacts in one step, over " +
-                std::to_string(static_cast<std::size_t>(limit));
+                std::to_string(static_cast<std::size_t>(psc::bullet::runawayContacts(a, b)));
   }
   return runaways;
 #else

@@ -690,10 +690,11 @@ std::vector<std::pair<Index, Index>> overlappingBodies(const std::vector<Body*>&
   return pairs;
 }
 
-std::vector<std::vector<char>> regionsNearOtherBodies(const std::vector<Body*>& bodies, const CullParams& params) {
+std::vector<std::vector<char>> regionsNearOtherBodies(const std::vector<Body*>& bodies, const BodyPairs& pairs,
+                                                      const CullParams& params) {
   std::vector<std::vector<char>> near(bodies.size());
   for (std::size_t i = 0; i < bodies.size(); ++i) near[i].assign(bodies[i]->regionCount(), 0);
-  for (const auto& [i, j] : overlappingBodies(bodies, params))
+  for (const auto& [i, j] : pairs)
     for (const auto& [x, y] : {std::pair<Index, Index>{i, j}, std::pair<Index, Index>{j, i}}) {
       const Body& X = *bodies[x];
       const Grown other = grown(bodies[y]->body_box, bodies[y]->margin, params.motion_factor);
@@ -703,9 +704,8 @@ std::vector<std::vector<char>> regionsNearOtherBodies(const std::vector<Body*>& 
   return near;
 }
 
-void cullAndCollect(const std::vector<Body*>& bodies, const CullParams& params, std::vector<FlaggedPair>& flagged,
-                    std::vector<CandidatePair>& candidates, StepStats& counters) {
-  const std::vector<std::pair<Index, Index>> pairs = overlappingBodies(bodies, params);
+void cullAndCollect(const std::vector<Body*>& bodies, const BodyPairs& pairs, const CullParams& params,
+                    std::vector<FlaggedPair>& flagged, std::vector<CandidatePair>& candidates, StepStats& counters) {
   Collector collect(params, flagged, counters);
   for (const auto& [i, j] : pairs) collect.bodyPair(*bodies[i], *bodies[j]);
   for (const Body* b : bodies)

@@ -35,15 +35,21 @@ struct CullParams {
 /// The pairs (i < j) of `bodies` whose grown body boxes overlap, by sort-and-sweep, sorted.
 std::vector<std::pair<Index, Index>> overlappingBodies(const std::vector<Body*>& bodies, const CullParams& params);
 
+using BodyPairs = std::vector<std::pair<Index, Index>>;
+
 /// For each body, whether each of its regions' grown boxes reaches the grown box of another body
-/// it overlaps: the regions whose particles can take part in a sensor decision this step.
-std::vector<std::vector<char>> regionsNearOtherBodies(const std::vector<Body*>& bodies, const CullParams& params);
+/// it overlaps (`pairs` = overlappingBodies): the regions whose particles can take part in a
+/// sensor decision this step.
+std::vector<std::vector<char>> regionsNearOtherBodies(const std::vector<Body*>& bodies, const BodyPairs& pairs,
+                                                      const CullParams& params);
 
 /// Flags the region pairs of different bodies that reach the candidate stage and appends the
-/// candidate pairs, grouped and sorted by (vertex_body, triangle_body). `bodies` ascending by id.
+/// candidate pairs, grouped and sorted by (vertex_body, triangle_body). `bodies` ascending by id;
+/// `pairs` = overlappingBodies(bodies, params).
 /// Adds to the cull's counters in `stats` (body_pairs … candidate_probes) and to ms_candidates
 /// (the time inside chunk pairs).
-void cullAndCollect(const std::vector<Body*>& bodies, const CullParams& params, std::vector<FlaggedPair>& flagged,
+void cullAndCollect(const std::vector<Body*>& bodies, const BodyPairs& pairs, const CullParams& params,
+                    std::vector<FlaggedPair>& flagged,
                     std::vector<CandidatePair>& candidates, StepStats& stats);
 
 }  // namespace psc::detail

@@ -11,7 +11,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
 #include <numeric>
 #include <sstream>
 
@@ -410,8 +409,12 @@ const StepResult& SensorWorld::step() {
   // [beyond] In the default mode a particle only serves the sensor decision of its region's pairs,
   // which exist only where the region's box reaches another body's: the other particles stay put
   // (and still pull).
-  const std::vector<std::vector<char>> near =
-      params.use_sensors ? detail::regionsNearOtherBodies(ordered, params) : std::vector<std::vector<char>>{};
+  const detail::BodyPairs body_pairs = w.settings.flagging == Flagging::Sensors
+                                           ? detail::BodyPairs{}
+                                           : detail::overlappingBodies(ordered, params);
+  const std::vector<std::vector<char>> near = params.use_sensors
+                                                  ? detail::regionsNearOtherBodies(ordered, body_pairs, params)
+                                                  : std::vector<std::vector<char>>{};
   detail::Particles& ps = w.particles;
   ps.clear();
   w.p_movable.clear();
@@ -450,7 +453,7 @@ const StepResult& SensorWorld::step() {
       st.ms_candidates = msSince(t);
     }
   } else {
-    detail::cullAndCollect(ordered, params, res.flagged, res.candidates, st);
+    detail::cullAndCollect(ordered, body_pairs, params, res.flagged, res.candidates, st);
     std::sort(res.flagged.begin(), res.flagged.end(), detail::flaggedLess);
     st.ms_flagging = msSince(t) - st.ms_candidates;
     st.candidate_pairs = res.candidates.size();

@@ -95,6 +95,11 @@ double runawayContacts(const btSoftBody& a, const btSoftBody& b) {
   return double(kRunawayContactsPerNode) * per_node * double(std::min(a.m_nodes.size(), b.m_nodes.size()));
 }
 
+bool isRunaway(const btSoftBody& a, const btSoftBody& b, std::size_t contacts) {
+  const auto nodes = static_cast<std::size_t>(std::min(a.m_nodes.size(), b.m_nodes.size()));
+  return contacts > kRunawayContactsPerNode * nodes && double(contacts) > runawayContacts(a, b);
+}
+
 Installation::Installation(btSoftRigidDynamicsWorld& world, const Settings& settings)
     : world_(world), dispatcher_(collisionDispatcherOf(world)), settings_(settings), sensors_(coreSettings(settings)) {
   if (settings.exact != ExactTest::Bullet && settings.exact != ExactTest::Robust &&
@@ -169,24 +174,16 @@ void Installation::collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, p
   const ExactCounts ab_counts = collideCandidates(settings_.exact, a, b, ab.first, ab.second);
   const auto ba = candidatesOf(candidates, id_b, id_a);
   const ExactCounts ba_counts = collideCandidates(settings_.exact, b, a, ba.first, ba.second);
-  for (const ExactCounts& counts : {ab_counts, ba_counts}) {
-    stats_.exact_tests += counts.tests;
-    stats_.contacts += counts.contacts;
-    stats_.robust_contacts += counts.robust;
-    stats_.crossing_contacts += counts.crossings;
-  }
+  addCounts(ab_counts);
+  addCounts(ba_counts);
   const std::size_t contacts = ab_counts.contacts + ba_counts.contacts;
-  // The face areas are only read for the rare pair with over 16 contacts per node.
-  const std::size_t nodes = static_cast<std::size_t>(std::min(a.m_nodes.size(), b.m_nodes.size()));
-  if (contacts > kRunawayContactsPerNode * nodes && double(contacts) > runawayContacts(a, b)) {
-    if (++stats_.runaway_pairs == 1) {
-      const btSoftBody::tSoftBodyArray& all = world_.getSoftBodyArray();
-      stats_.runaway = "psc::bullet: runaway contact between soft bodies " +
-                       std::to_string(all.findLinearSearch(&a)) + " and " + std::to_string(all.findLinearSearch(&b)) +
-                       " of the world: " + std::to_string(contacts) + " contacts in one step, over " +
-                       std::to_string(static_cast<std::size_t>(runawayContacts(a, b))) +
-                       "; they are inside each other or faster than the contact radius follows";
-    }
+  if (isRunaway(a, b, contacts) && ++stats_.runaway_pairs == 1) {
+    const btSoftBody::tSoftBodyArray& all = world_.getSoftBodyArray();
+    stats_.runaway = "psc::bullet: runaway contact between soft bodies " + std::to_string(all.findLinearSearch(&a)) +
+                     " and " + std::to_string(all.findLinearSearch(&b)) + " of the world: " +
+                     std::to_string(contacts) + " contacts in one step, over " +
+                     std::to_string(static_cast<std::size_t>(runawayContacts(a, b))) +
+                     "; they are inside each other or faster than the contact radius follows";
   }
   ++stats_.body_pairs;
   stats_.ms_exact += millisecondsSince(start);
@@ -227,6 +224,13 @@ void Installation::collideUndispatchedPairs() {
   }
 }
 
+void Installation::addCounts(const ExactCounts& counts) {
+  stats_.exact_tests += counts.tests;
+  stats_.contacts += counts.contacts;
+  stats_.robust_contacts += counts.robust;
+  stats_.crossing_contacts += counts.crossings;
+}
+
 void Installation::syncSelfCollision() {
   for (psc::BodyId id : sensors_.bodyIds()) {
     const btSoftBody* body = registry_.bodyOf(id);
@@ -246,10 +250,7 @@ void Installation::collideSelfPairs() {
     if (body == nullptr || range.first == range.second) continue;
     const auto start = std::chrono::steady_clock::now();
     const ExactCounts counts = collideCandidates(settings_.exact, *body, *body, range.first, range.second);
-    stats_.exact_tests += counts.tests;
-    stats_.contacts += counts.contacts;
-    stats_.robust_contacts += counts.robust;
-    stats_.crossing_contacts += counts.crossings;
+    addCounts(counts);
     stats_.self_exact_tests += counts.tests;
     stats_.self_contacts += counts.contacts;
     ++stats_.self_bodies;

@@ -3,6 +3,7 @@
 
 #include "body_registry.h"
 #include "soft_soft_algorithm.h"
+#include "psc/bullet/exact.h"
 #include "psc/bullet/settings.h"
 #include "psc/bullet/stats.h"
 #include "psc/world.h"
@@ -79,6 +80,8 @@ class Installation {
   /// the way Bullet filters dispatched pairs (broadphase groups/masks and overlap filter callback,
   /// dispatcher's needsCollision).
   void collideUndispatchedPairs();
+  /// Adds one exact-stage call's counts to the step's Stats.
+  void addCounts(const ExactCounts& counts);
   /// Switches the core's self-collision of each body to what the settings and overrides say.
   void syncSelfCollision();
   /// Each self-colliding body against itself, from the step's candidates.

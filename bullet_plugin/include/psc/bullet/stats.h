@@ -23,6 +23,9 @@ namespace psc::bullet {
 inline constexpr std::size_t kRunawayContactsPerNode = 16;
 /// The contact count above which the pair (a, b) is running away (rule above).
 double runawayContacts(const btSoftBody& a, const btSoftBody& b);
+/// Whether `contacts` in one step put (a, b) over the rule; reads the face areas only past
+/// kRunawayContactsPerNode contacts per node of the smaller body.
+bool isRunaway(const btSoftBody& a, const btSoftBody& b, std::size_t contacts);
 
 struct Stats {
   std::uint64_t sensor_steps = 0;     ///< sensor steps since install()
