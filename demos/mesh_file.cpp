@@ -14,9 +14,13 @@
 #include <map>
 #include <new>
 #include <unordered_map>
+#include <vector>
 
 namespace psc::demo {
 namespace {
+
+/// How much of a file the header checks read.
+constexpr std::size_t kHeaderBytes = 64 * 1024;
 
 Error fileError(const std::string& path, const std::string& what) {
   return Error(ErrorCode::FileError, "mesh file '" + path + "': " + what);
@@ -75,41 +79,58 @@ void collect(const aiScene* scene, TriMesh& out, MeshFileInfo& info, const std::
   }
 }
 
-/// Element counts in OFF and PLY headers must fit the file: every element takes at least one
+/// Throws unless `token` is a count no larger than the file: every element takes at least one
 /// byte. Without this check assimp believes a header that claims 353,535,235,358 vertices
 /// (assimp-testmodels' OutOfMemory.off) and spends a minute and gigabytes before giving up.
-void checkDeclaredCounts(const std::string& path, std::uintmax_t size) {
+void checkCount(const std::string& path, std::uintmax_t size, const std::string& what, const std::string& token) {
+  std::size_t used = 0;
+  unsigned long long n = 0;
+  try {
+    n = std::stoull(token, &used);
+  } catch (const std::exception&) {
+    n = ~0ull;  // too large for any integer type: absurd as well
+    used = token.find_first_not_of("0123456789") == std::string::npos ? token.size() : 0;
+  }
+  if (used == token.size() && n > size)
+    throw fileError(path, "the header claims " + token + " " + what + " but the file has only " +
+                              std::to_string(size) + " bytes");
+}
+
+/// A PLY header must end in an end_header line before assimp sees it: assimp 5.2's PLY reader
+/// loops forever on a header that never ends (a fuzzer found "ply\nformat ascii 1.0\nfoo").
+/// Element counts must fit the file. Other lines are left to assimp, which tolerates
+/// non-standard ones (assimp-testmodels' Wuson.ply has a comment without "comment").
+void checkPlyHeader(const std::string& path, std::uintmax_t size, std::istream& text) {
+  for (std::string line; std::getline(text, line);) {
+    std::istringstream words(line);
+    std::string keyword, name, count;
+    words >> keyword;
+    if (keyword == "end_header") return;
+    if (keyword == "element" && words >> name >> count) checkCount(path, size, name + " elements", count);
+  }
+  throw fileError(path, "the PLY header has no end_header line within the file's first " +
+                            std::to_string(kHeaderBytes) + " bytes");
+}
+
+/// Headers are checked before assimp reads the file: OFF and PLY element counts must fit the file,
+/// and a PLY header must end (see checkPlyHeader).
+void checkHeader(const std::string& path, std::uintmax_t size) {
   std::ifstream in(path, std::ios::binary);
-  std::string head(4096, '\0');
+  std::string head(kHeaderBytes, '\0');
   in.read(head.data(), static_cast<std::streamsize>(head.size()));
   head.resize(static_cast<std::size_t>(in.gcount()));
   std::istringstream text(head);
   std::string first;
-  text >> first;
-  const auto tooMany = [&](const std::string& what, const std::string& token) {
-    // Counts too large for any integer type are absurd as well.
-    std::size_t used = 0;
-    unsigned long long n = 0;
-    try {
-      n = std::stoull(token, &used);
-    } catch (const std::exception&) {
-      return;  // not a number: leave the diagnosis to assimp
-    }
-    if (used == token.size() && n > size)
-      throw fileError(path, "the header claims " + token + " " + what + " but the file has only " +
-                                std::to_string(size) + " bytes");
-  };
+  std::getline(text, first);
+  std::istringstream words(first);
+  words >> first;
+  if (first == "ply") return checkPlyHeader(path, size, text);
   if (first.size() >= 3 && first.compare(first.size() - 3, 3, "OFF") == 0) {
-    std::string nv, nf;
-    if (text >> nv >> nf) {
-      tooMany("vertices", nv);
-      tooMany("faces", nf);
-    }
-  } else if (first == "ply") {
-    for (std::string line; std::getline(text, line) && line.rfind("end_header", 0) != 0;) {
-      std::istringstream words(line);
-      std::string keyword, name, count;
-      if (words >> keyword >> name >> count && keyword == "element") tooMany(name + " elements", count);
+    std::istringstream rest(head);
+    std::string skip, nv, nf;
+    if (rest >> skip >> nv >> nf) {
+      checkCount(path, size, "vertices", nv);
+      checkCount(path, size, "faces", nf);
     }
   }
 }
@@ -123,7 +144,7 @@ TriMesh loadMeshFile(const std::string& path, MeshFileInfo* info_out) {
   const std::uintmax_t size = std::filesystem::file_size(path, ec);
   if (ec) throw fileError(path, "cannot read its size: " + ec.message());
   if (size == 0) throw fileError(path, "the file is empty");
-  checkDeclaredCounts(path, size);
+  checkHeader(path, size);
 
   Assimp::Importer importer;
   // Lines and points are split off so that only triangles remain in the meshes we read.

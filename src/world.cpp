@@ -471,28 +471,6 @@ const StepResult& SensorWorld::step() {
 
 const StepResult& SensorWorld::lastResult() const { return impl_->result; }
 
-CandidateSet SensorWorld::candidateSet(const FlaggedPair& pair, BodyId vertex_body) const {
-  if (vertex_body != pair.body_a && vertex_body != pair.body_b)
-    throw Error(ErrorCode::InvalidArgument, "candidateSet: body " + std::to_string(vertex_body) +
-                                                " is not one of the flagged pair's bodies");
-  const bool a_side = vertex_body == pair.body_a;
-  const Body& vb = impl_->get(vertex_body);
-  const Body& tb = impl_->get(a_side ? pair.body_b : pair.body_a);
-  CandidateSet out;
-  out.vertex_body = vb.id;
-  out.triangle_body = tb.id;
-  // Outside the thesis mode the region lists are not kept: build them for this query.
-  const auto lists = [](const Body& b) {
-    return b.regions.vertices.rows() == b.regionCount()
-               ? b.regions
-               : detail::buildRegionLists(*b.topology, b.partition.region_of, b.regionCount());
-  };
-  const detail::RegionLists vl = lists(vb), tl = lists(tb);
-  detail::regionVertexSet(vl, a_side ? pair.region_a : pair.region_b, impl_->settings.one_ring, out.vertices);
-  detail::regionTriangleSet(tl, a_side ? pair.region_b : pair.region_a, impl_->settings.one_ring, out.triangles);
-  return out;
-}
-
 double SensorWorld::mu(BodyId a, BodyId b) const {
   const Body& ba = impl_->get(a);
   const Body& bb = impl_->get(b);

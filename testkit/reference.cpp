@@ -57,6 +57,46 @@ bool selfPairExcluded(Index v, const Triangle& t, const std::vector<Vec3>& rest,
   return pointTriangleDistance(rest[v], rest[t[0]], rest[t[1]], rest[t[2]]) < rest_exclusion * 2.0 * margin;
 }
 
+namespace {
+/// in_ring[u]: u lies outside `region` and shares a triangle with a vertex inside it.
+std::vector<char> ringOf(const MeshTopology& topology, const std::vector<Index>& region_of, Index region) {
+  std::vector<char> in_ring(topology.vertexCount(), 0);
+  for (Index t = 0; t < topology.triangleCount(); ++t) {
+    const Triangle& tri = topology.triangle(t);
+    const bool touches = region_of[tri[0]] == region || region_of[tri[1]] == region || region_of[tri[2]] == region;
+    if (touches)
+      for (Index u : tri)
+        if (region_of[u] != region) in_ring[u] = 1;
+  }
+  return in_ring;
+}
+}  // namespace
+
+RegionSets regionSets(const MeshTopology& vertex_topology, const std::vector<Index>& vertex_region_of,
+                      Index vertex_region, const MeshTopology& triangle_topology,
+                      const std::vector<Index>& triangle_region_of, Index triangle_region, bool one_ring) {
+  RegionSets out;
+  const std::vector<char> vring = ringOf(vertex_topology, vertex_region_of, vertex_region);
+  for (Index v = 0; v < vertex_topology.vertexCount(); ++v)
+    if (vertex_region_of[v] == vertex_region || (one_ring && vring[v])) out.vertices.push_back(v);
+  const std::vector<char> tring = ringOf(triangle_topology, triangle_region_of, triangle_region);
+  for (Index t = 0; t < triangle_topology.triangleCount(); ++t) {
+    bool in = false;
+    for (Index u : triangle_topology.triangle(t)) in = in || triangle_region_of[u] == triangle_region || (one_ring && tring[u]);
+    if (in) out.triangles.push_back(t);
+  }
+  return out;
+}
+
+RegionSets regionSets(const SensorWorld& world, const FlaggedPair& pair, BodyId vertex_body) {
+  const bool a_side = vertex_body == pair.body_a;
+  const BodyId triangle_body = a_side ? pair.body_b : pair.body_a;
+  return regionSets(world.topology(vertex_body), world.partition(vertex_body).region_of,
+                    a_side ? pair.region_a : pair.region_b, world.topology(triangle_body),
+                    world.partition(triangle_body).region_of, a_side ? pair.region_b : pair.region_a,
+                    world.settings().one_ring);
+}
+
 std::vector<std::pair<Index, Index>> bruteContacts(const TriMesh& vm, const TriMesh& tm, double radius) {
   std::vector<std::pair<Index, Index>> out;
   forEachContact(vm.vertices, tm.vertices, tm.triangles, [&](Index) { return radius; },

@@ -70,15 +70,6 @@ struct CandidatePair {
   }
 };
 
-/// The candidate sets of one flagged pair in one direction (thesis §3.5): the vertices of region I
-/// (+ one ring) of `vertex_body` and the triangles touching region J (+ one ring) of `triangle_body`.
-struct CandidateSet {
-  BodyId vertex_body = kInvalidBody;
-  BodyId triangle_body = kInvalidBody;
-  std::vector<Index> vertices;   ///< sorted
-  std::vector<Index> triangles;  ///< sorted
-};
-
 struct StepStats {
   std::size_t bodies = 0;
   std::size_t particles = 0;
@@ -155,9 +146,6 @@ class SensorWorld {
   /// whether bodies need repartitioning. Deterministic.
   const StepResult& step();
   const StepResult& lastResult() const;
-
-  /// The candidate sets of a flagged pair, vertices of `vertex_body` against triangles of the other.
-  CandidateSet candidateSet(const FlaggedPair& pair, BodyId vertex_body) const;
 
   /// μ between two bodies with the current margins (without the per-vertex motion term):
   /// μ = mu_edge_factor · max(ē_A, ē_B) + margin_A + margin_B.

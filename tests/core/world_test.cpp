@@ -67,8 +67,8 @@ CoverageReport coverage(Scene& sc, const StepResult& res, double radius) {
   std::vector<Sets> sets;
   for (const FlaggedPair& f : res.flagged)
     for (BodyId vb : {f.body_a, f.body_b}) {
-      const CandidateSet cs = sc.world.candidateSet(f, vb);
-      sets.push_back({cs.vertex_body, cs.triangle_body, {cs.vertices.begin(), cs.vertices.end()},
+      const testkit::RegionSets cs = testkit::regionSets(sc.world, f, vb);
+      sets.push_back({vb, vb == f.body_a ? f.body_b : f.body_a, {cs.vertices.begin(), cs.vertices.end()},
                       {cs.triangles.begin(), cs.triangles.end()}, f.by_sensors});
     }
   for (std::size_t i = 0; i < sc.meshes.size(); ++i)
@@ -179,7 +179,8 @@ void checkCandidates(Flagging mode) {
   std::size_t near = 0, all_pairs = 0;
   for (const FlaggedPair& f : res.flagged)
     for (BodyId vb : {f.body_a, f.body_b}) {
-      const CandidateSet cs = sc.world.candidateSet(f, vb);
+      const testkit::RegionSets cs = testkit::regionSets(sc.world, f, vb);
+      const BodyId tb = vb == f.body_a ? f.body_b : f.body_a;
       const TriMesh& vm = sc.meshes[vb == sc.ids[0] ? 0 : 1];
       const TriMesh& tm = sc.meshes[vb == sc.ids[0] ? 1 : 0];
       all_pairs += cs.vertices.size() * cs.triangles.size();
@@ -189,7 +190,7 @@ void checkCandidates(Flagging mode) {
           if (testkit::pointTriangleDistance(vm.vertices[v], tm.vertices[tri[0]], tm.vertices[tri[1]],
                                           tm.vertices[tri[2]]) < 2 * margin) {
             ++near;
-            EXPECT_TRUE(cand.count({cs.vertex_body, v, cs.triangle_body, t})) << "vertex " << v << " triangle " << t;
+            EXPECT_TRUE(cand.count({vb, v, tb, t})) << "vertex " << v << " triangle " << t;
           }
         }
     }

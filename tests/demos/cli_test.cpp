@@ -318,10 +318,13 @@ TEST(DemoCli, BrokenMeshFilesGiveAClearErrorAndNonZeroExit) {
     std::ofstream(dir / "truncated.off") << "OFF\n8 12 0\n-0.5 -0.5 0.5\n0.5 -0.5";
     std::ofstream(dir / "huge_count.ply") << "ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\n"
                                               "property float y\nproperty float z\nend_header\n0 0 0\n";
+    // assimp 5.2 loops forever on a PLY header without end_header (found by scripts/fuzz).
+    std::ofstream(dir / "unterminated.ply") << "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n";
     std::ofstream(dir / "points_only.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\np 1\np 2\n";
     std::ofstream(dir / "empty.stl");
   }
-  for (const char* f : {"garbage.obj", "truncated.off", "huge_count.ply", "points_only.obj", "empty.stl"})
+  for (const char* f : {"garbage.obj", "truncated.off", "huge_count.ply", "unterminated.ply", "points_only.obj",
+                        "empty.stl"})
     files.push_back((dir / f).string());
   files.push_back((dir / "does_not_exist.obj").string());
   files.push_back(dir.string());

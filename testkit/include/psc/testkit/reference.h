@@ -3,8 +3,10 @@
 // library's candidate code on purpose.
 #pragma once
 
+#include "psc/mesh.h"
 #include "psc/shapes.h"
 #include "psc/types.h"
+#include "psc/world.h"
 
 #include <cstddef>
 #include <utility>
@@ -52,6 +54,22 @@ void forEachContact(const std::vector<Vec3>& points, const std::vector<Vec3>& co
 /// closer to t than rest_exclusion × (2 × margin) in the body's rest shape `rest` (what touches at
 /// rest is the surface itself, not a fold).
 bool selfPairExcluded(Index v, const Triangle& t, const std::vector<Vec3>& rest, double margin, double rest_exclusion);
+
+/// The thesis's candidate sets of one flagged region pair in one direction (§3.5), from the
+/// definition alone: the vertices of region `vertex_region` of the vertex body (with `one_ring`,
+/// also their neighbours in other regions) and the triangles of the other body with a corner in
+/// `triangle_region` (with `one_ring`, also the triangles at that region's ring vertices). Both
+/// sorted. The core's thesis mode tests exactly these sets.
+struct RegionSets {
+  std::vector<Index> vertices;
+  std::vector<Index> triangles;
+};
+RegionSets regionSets(const MeshTopology& vertex_topology, const std::vector<Index>& vertex_region_of,
+                      Index vertex_region, const MeshTopology& triangle_topology,
+                      const std::vector<Index>& triangle_region_of, Index triangle_region, bool one_ring);
+/// The same for a flagged pair of `world` (after its step), vertices of `vertex_body` (one of the
+/// pair's bodies) against triangles of the other, with the world's one_ring setting.
+RegionSets regionSets(const SensorWorld& world, const FlaggedPair& pair, BodyId vertex_body);
 
 /// (vertex of `vm`, triangle of `tm`) pairs closer than `radius`, in that order.
 std::vector<std::pair<Index, Index>> bruteContacts(const TriMesh& vm, const TriMesh& tm, double radius);
