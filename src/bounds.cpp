@@ -295,12 +295,24 @@ struct VertexRec {
   double r;   ///< contact radius of the vertex: margin sum + motion term
   double xn;  ///< projection on the sensor axis
   Index v;
+  double reach2;  ///< MotionBound::Radius: squared distance below which a triangle is kept (reachOf)
 };
+
+/// With MotionBound::Radius a pair is kept when the vertex lies within its radius r of the
+/// triangle, by the exact distance in double. The exact stage may decide in single precision
+/// (Bullet's CollideVF_SS): the slack keeps every pair whose float-rounded distance can fall
+/// below r, i.e. a relative 1e-5 of r plus 1e-6 of the coordinates' magnitude (float's 6e-8 over
+/// the dozen operations of a point-triangle distance).
+double reachOf(const Vec3& x, double r) {
+  const double reach = r * (1.0 + 1e-5) + 1e-6 * x.cwiseAbs().maxCoeff();
+  return reach * reach;
+}
 
 struct TriangleRec {
   Vec3 lo, hi;
   double nlo, nhi;  ///< extent along the sensor axis
   Index t;
+  Vec3 a, b, c;  ///< corners at the current positions (the distance test with MotionBound::Radius)
 };
 
 struct Scratch {
@@ -326,17 +338,9 @@ struct PairContext {
 
 /// Self-collision's exclusion rule: the triangle holds the vertex, or the two were within the
 /// exclusion distance in the body's rest shape.
-/// With MotionBound::Radius the pair must also be within the vertex's radius r now (with a
-/// relative slack for single-precision callers): a surface at rest is all near pairs, and
-/// boxes alone would hand its curved parts to the exact test every step.
-bool excludedSelfPair(const PairContext& ctx, Index v, Index t, double r) {
+bool excludedSelfPair(const PairContext& ctx, Index v, Index t) {
   const Triangle& tri = ctx.tb.topology->triangle(t);
   if (tri[0] == v || tri[1] == v || tri[2] == v) return true;
-  if (!ctx.swept) {
-    const PositionView& x = ctx.tb.positions;
-    const double reach = r * (1.0 + 1e-5);
-    if (!(pointTriangleDistance2(x[v], x[tri[0]], x[tri[1]], x[tri[2]]) < reach * reach)) return true;
-  }
   const std::vector<Vec3>& rest = ctx.tb.rest;
   return pointTriangleDistance2(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) < ctx.self_exclude2;
 }
@@ -354,7 +358,7 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
       r = ctx.margin_sum + 0.5 * (x - q).norm();
       x = 0.5 * (x + q);
     }
-    ctx.s.verts.push_back({x, r, ctx.axis.valid ? ctx.axis.project(x) : 0.0, v});
+    ctx.s.verts.push_back({x, r, ctx.axis.valid ? ctx.axis.project(x) : 0.0, v, swept ? 0.0 : reachOf(x, r)});
   }
   ctx.counters.candidate_vertices += ctx.vb.chunks.vertices.row(c.chunk).size();
 }
@@ -367,7 +371,7 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   for (Index t : ctx.tb.chunks.triangles.row(c.chunk)) {
     const Triangle& tri = topo.triangle(t);
     const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], cc = ctx.tb.positions[tri[2]];
-    TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0, t};
+    TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0, t, a, b, cc};
     if (ctx.axis.valid) {
       const double pa = ctx.axis.project(a), pb = ctx.axis.project(b), pc = ctx.axis.project(cc);
       rec.nlo = std::min({pa, pb, pc});
@@ -428,7 +432,14 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       ++ctx.counters.candidate_probes;
       if (sensors && (vr.xn + vr.r < tr.nlo || vr.xn - vr.r > tr.nhi)) continue;
       if (!ballMeetsBox(vr.x, tr.lo, tr.hi, vr.r)) continue;
-      if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, tr.t, vr.r)) {
+      // With the radius bound the exact distance decides: a pair that is not within the vertex's
+      // radius now is no candidate (the swept bound keeps what the boxes keep: its pairs may meet
+      // during the step).
+      if (!ctx.swept && !(pointTriangleDistance2(vr.x, tr.a, tr.b, tr.c) < vr.reach2)) {
+        ++ctx.counters.candidates_beyond_reach;
+        continue;
+      }
+      if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, tr.t)) {
         ++ctx.counters.self_excluded_pairs;
         continue;
       }
