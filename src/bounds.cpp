@@ -76,8 +76,8 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
   const std::size_t n = ch.chunk_of.size();
   for (std::size_t v = 0; v < n; ++v) {
     // Positions usually live inside larger records (Bullet's nodes are 256 bytes): fetch ahead.
-    __builtin_prefetch(base + (v + 8) * stride);
-    if (prev != nullptr) __builtin_prefetch(prev + (v + 8) * prev_stride);
+    __builtin_prefetch(base + (v + 24) * stride);
+    if (prev != nullptr) __builtin_prefetch(prev + (v + 24) * prev_stride);
     const Index c = ch.chunk_of[v];
     if (c == kInvalidIndex) continue;
     const T* p = reinterpret_cast<const T*>(base + v * stride);
@@ -110,15 +110,18 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
   }
 }
 
-// Area and longest edge of the triangles a chunk owns; their vertices were just read by the refit.
+// Area of each region's triangles and the longest edge, in triangle order: a mesh's triangles and
+// their vertices come in about the same order, so this reads the positions nearly in memory order
+// (in chunk order it was a random walk, 40% of the refit at 8 x 50k vertices). A triangle counts
+// for the region of its owning chunk, the chunk of its lowest vertex.
 template <typename T>
-void measureChunk(const MeshTopology& topo, const char* base, std::size_t stride, IndexRange triangles, double& area,
-                  double& max_edge2) {
-  for (Index t : triangles) {
+void measureTriangles(const MeshTopology& topo, const ChunkLists& ch, const char* base, std::size_t stride,
+                      std::vector<double>& region_area, double& max_edge2) {
+  for (std::size_t t = 0; t < topo.triangleCount(); ++t) {
     const Triangle& tri = topo.triangle(t);
     const Vec3 a = load<T>(base, stride, tri[0]), b = load<T>(base, stride, tri[1]), c = load<T>(base, stride, tri[2]);
     const Vec3 ab = b - a, ac = c - a, bc = c - b;
-    area += 0.5 * ab.cross(ac).norm();
+    region_area[ch.region_of[ch.chunk_of[std::min({tri[0], tri[1], tri[2]})]]] += 0.5 * ab.cross(ac).norm();
     max_edge2 = std::max({max_edge2, ab.squaredNorm(), ac.squaredNorm(), bc.squaredNorm()});
   }
 }
@@ -176,13 +179,10 @@ void refitBounds(Body& b, bool measure, bool swept) {
   }
   if (measure) {
     double max_edge2 = 0.0;
-    for (std::size_t c = 0; c < ch.count(); ++c) {
-      double& area = b.shape.region_area[ch.region_of[c]];
-      if (is_float)
-        measureChunk<float>(*b.topology, base, stride, ch.triangles.row(static_cast<Index>(c)), area, max_edge2);
-      else
-        measureChunk<double>(*b.topology, base, stride, ch.triangles.row(static_cast<Index>(c)), area, max_edge2);
-    }
+    if (is_float)
+      measureTriangles<float>(*b.topology, ch, base, stride, b.shape.region_area, max_edge2);
+    else
+      measureTriangles<double>(*b.topology, ch, base, stride, b.shape.region_area, max_edge2);
     b.shape.max_edge = std::sqrt(max_edge2);
   }
   for (Index r = 0; r < b.regionCount(); ++r) {

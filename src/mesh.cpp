@@ -23,15 +23,30 @@ Index findRoot(std::vector<Index>& parent, Index x) {
 
 }  // namespace
 
-IndexRows IndexRows::fromPairs(std::size_t rows, std::vector<std::pair<Index, Index>>& pairs) {
-  std::sort(pairs.begin(), pairs.end());
-  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+IndexRows IndexRows::fromPairs(std::size_t rows, const std::vector<std::pair<Index, Index>>& pairs) {
+  // Counting sort by row (stable), then each row sorted and deduplicated on its own: O(pairs +
+  // Σ row log row) instead of a global sort. Rows usually arrive sorted already (callers loop in
+  // index order), and then the per-row pass only checks it.
   IndexRows out;
   out.offsets.assign(rows + 1, 0);
   for (const auto& p : pairs) ++out.offsets[p.first + 1];
   for (std::size_t r = 0; r < rows; ++r) out.offsets[r + 1] += out.offsets[r];
   out.items.resize(pairs.size());
-  for (std::size_t k = 0; k < pairs.size(); ++k) out.items[k] = pairs[k].second;
+  {
+    std::vector<Index> cursor(out.offsets.begin(), out.offsets.end() - 1);
+    for (const auto& p : pairs) out.items[cursor[p.first]++] = p.second;
+  }
+  Index write = 0;
+  for (std::size_t r = 0; r < rows; ++r) {
+    const auto first = out.items.begin() + out.offsets[r], last = out.items.begin() + out.offsets[r + 1];
+    if (!std::is_sorted(first, last)) std::sort(first, last);
+    const auto end = std::unique(first, last);
+    out.offsets[r] = write;
+    write = static_cast<Index>(std::copy(first, end, out.items.begin() + write) - out.items.begin());
+  }
+  out.offsets[rows] = write;
+  out.items.resize(write);
+  out.items.shrink_to_fit();
   return out;
 }
 

@@ -42,7 +42,7 @@ namespace {
 
 // Median split along the longest axis of the box until at most `limit` vertices remain.
 void splitChunks(std::vector<Index>& ids, std::size_t begin, std::size_t end, std::size_t limit,
-                 const PositionView& positions, std::vector<std::pair<std::size_t, std::size_t>>& out) {
+                 const std::vector<Vec3>& positions, std::vector<std::pair<std::size_t, std::size_t>>& out) {
   if (end - begin <= limit) {
     out.emplace_back(begin, end);
     return;
@@ -77,6 +77,10 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
   std::vector<std::pair<std::size_t, std::size_t>> ranges;
   Index chunk = 0;
   out.region_begin.push_back(0);
+  // One copy of the positions: the splits compare coordinates O(M log M) times, and the view may
+  // point into larger records (Bullet's 256-byte nodes) of either precision.
+  std::vector<Vec3> x(topology.vertexCount());
+  for (Index v = 0; v < topology.vertexCount(); ++v) x[v] = positions[v];
   std::vector<std::pair<Index, Index>> members;
   members.reserve(topology.vertexCount());
   for (Index v = 0; v < topology.vertexCount(); ++v) members.emplace_back(region_of[v], v);
@@ -85,7 +89,7 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
     const IndexRange row = by_region.row(r);
     ids.assign(row.begin(), row.end());
     ranges.clear();
-    if (!ids.empty()) splitChunks(ids, 0, ids.size(), chunk_vertices, positions, ranges);
+    if (!ids.empty()) splitChunks(ids, 0, ids.size(), chunk_vertices, x, ranges);
     for (const auto& range : ranges) {
       std::sort(ids.begin() + static_cast<std::ptrdiff_t>(range.first),
                 ids.begin() + static_cast<std::ptrdiff_t>(range.second));

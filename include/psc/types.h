@@ -38,8 +38,8 @@ struct IndexRows {
   std::size_t rows() const { return offsets.size() - 1; }
   IndexRange row(std::size_t r) const { return {items.data() + offsets[r], items.data() + offsets[r + 1]}; }
   std::size_t bytes() const { return (offsets.capacity() + items.capacity()) * sizeof(Index); }
-  /// Rows from (row, item) pairs; each row's items come out sorted and unique. Sorts `pairs`.
-  static IndexRows fromPairs(std::size_t rows, std::vector<std::pair<Index, Index>>& pairs);
+  /// Rows from (row, item) pairs; each row's items come out sorted and unique.
+  static IndexRows fromPairs(std::size_t rows, const std::vector<std::pair<Index, Index>>& pairs);
 };
 
 }  // namespace psc
