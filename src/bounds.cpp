@@ -45,13 +45,6 @@ bool inside(const Vec3& x, const Vec3& lo, const Vec3& hi, double r) {
   return (x.array() >= lo.array() - r).all() && (x.array() <= hi.array() + r).all();
 }
 
-/// The ball of radius r about x meets the box: tighter than inside() at the box's edges and
-/// corners, where a cube of half-side r reaches further than the ball.
-bool ballMeetsBox(const Vec3& x, const Vec3& lo, const Vec3& hi, double r) {
-  const Vec3 d = (lo - x).cwiseMax(x - hi).cwiseMax(Vec3::Zero());
-  return d.squaredNorm() <= r * r;
-}
-
 /// Axis along which the box is longest: the sweep axis that separates the most.
 int longestAxis(const Vec3& lo, const Vec3& hi) {
   Eigen::Index axis = 0;
@@ -308,11 +301,16 @@ double reachOf(const Vec3& x, double r) {
   return reach * reach;
 }
 
+/// What a probe reads of a triangle: its box and its extent along the sensor axis (one cache line).
 struct TriangleRec {
   Vec3 lo, hi;
   double nlo, nhi;  ///< extent along the sensor axis
-  Index t;
+};
+
+/// The rest, read only for the pairs whose boxes meet (parallel to Scratch::tris).
+struct TriangleCorners {
   Vec3 a, b, c;  ///< corners at the current positions (the distance test with MotionBound::Radius)
+  Index t;
 };
 
 struct Scratch {
@@ -320,6 +318,7 @@ struct Scratch {
   std::vector<ChunkRef> near_a, near_b;
   std::vector<VertexRec> verts;
   std::vector<TriangleRec> tris;
+  std::vector<TriangleCorners> corners;
   std::vector<Index> tri_keep;
 };
 
@@ -371,7 +370,7 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   for (Index t : ctx.tb.chunks.triangles.row(c.chunk)) {
     const Triangle& tri = topo.triangle(t);
     const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], cc = ctx.tb.positions[tri[2]];
-    TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0, t, a, b, cc};
+    TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0};
     if (ctx.axis.valid) {
       const double pa = ctx.axis.project(a), pb = ctx.axis.project(b), pc = ctx.axis.project(cc);
       rec.nlo = std::min({pa, pb, pc});
@@ -390,6 +389,7 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
       }
     }
     ctx.s.tris.push_back(rec);
+    ctx.s.corners.push_back({a, b, cc, t});
   }
   ctx.counters.candidate_triangles += ctx.tb.chunks.triangles.row(c.chunk).size();
 }
@@ -404,6 +404,7 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
   const std::size_t nv = ctx.vb.chunks.vertices.row(cv.chunk).size();
   bool ready = false;
   Scratch& s = ctx.s;
+  std::size_t probes = 0;
   for (std::size_t i = 0; i < nv; ++i) {
     const VertexRec& vr = s.verts[static_cast<std::size_t>(cv.vertices_at) + i];
     // The slab: a vertex farther than r from the triangle chunk's extent along n is farther
@@ -427,25 +428,34 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       }
       ready = true;
     }
+    probes += s.tri_keep.size();
+    const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
+    const double n_lo = vr.xn - vr.r, n_hi = vr.xn + vr.r;
     for (Index k : s.tri_keep) {
       const TriangleRec& tr = s.tris[k];
-      ++ctx.counters.candidate_probes;
-      if (sensors && (vr.xn + vr.r < tr.nlo || vr.xn - vr.r > tr.nhi)) continue;
-      if (!ballMeetsBox(vr.x, tr.lo, tr.hi, vr.r)) continue;
+      if (sensors && (n_hi < tr.nlo || n_lo > tr.nhi)) continue;
+      // The vertex's ball against the triangle's box: tighter than a cube of half-side r at the
+      // box's edges and corners.
+      const double dx = std::max(std::max(tr.lo.x() - x, x - tr.hi.x()), 0.0);
+      const double dy = std::max(std::max(tr.lo.y() - y, y - tr.hi.y()), 0.0);
+      const double dz = std::max(std::max(tr.lo.z() - z, z - tr.hi.z()), 0.0);
+      if (dx * dx + dy * dy + dz * dz > r2) continue;
+      const TriangleCorners& tc = s.corners[k];
       // With the radius bound the exact distance decides: a pair that is not within the vertex's
       // radius now is no candidate (the swept bound keeps what the boxes keep: its pairs may meet
       // during the step).
-      if (!ctx.swept && !(pointTriangleDistance2(vr.x, tr.a, tr.b, tr.c) < vr.reach2)) {
+      if (!ctx.swept && !(pointTriangleDistance2(vr.x, tc.a, tc.b, tc.c) < vr.reach2)) {
         ++ctx.counters.candidates_beyond_reach;
         continue;
       }
-      if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, tr.t)) {
+      if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, tc.t)) {
         ++ctx.counters.self_excluded_pairs;
         continue;
       }
-      ctx.out.push_back((std::uint64_t{vr.v} << 32) | tr.t);
+      ctx.out.push_back((std::uint64_t{vr.v} << 32) | tc.t);
     }
   }
+  ctx.counters.candidate_probes += probes;
 }
 
 struct Group {
@@ -545,6 +555,7 @@ class Collector {
       counters_.chunk_pairs += chunk_pairs_.size();
       s_.verts.clear();
       s_.tris.clear();
+      s_.corners.clear();
       for (const auto& [ka, kb] : chunk_pairs_) {
         ChunkRef& ca = s_.near_a[ka];
         ChunkRef& cb = other[kb];
@@ -618,6 +629,7 @@ class Collector {
     counters_.chunk_pairs += chunk_pairs_.size();
     s_.verts.clear();
     s_.tris.clear();
+    s_.corners.clear();
     // Each chunk is gathered once as a vertex side for one direction and as a triangle side for
     // the other: two passes keep the two directions' records apart.
     for (const auto& [ka, kb] : chunk_pairs_) chunkCandidates(to_b, s_.near_a[ka], s_.near_b[kb]);
@@ -625,6 +637,7 @@ class Collector {
     for (ChunkRef& c : s_.near_b) c.vertices_at = c.triangles_at = -1;
     s_.verts.clear();
     s_.tris.clear();
+    s_.corners.clear();
     for (const auto& [ka, kb] : chunk_pairs_) chunkCandidates(to_a, s_.near_b[kb], s_.near_a[ka]);
     counters_.ms_candidates += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }

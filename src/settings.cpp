@@ -20,6 +20,7 @@ void validate(const SensorSettings& s) {
     bad("mu_edge_factor", s.mu_edge_factor, "must be finite and at least 0.5 (thesis §5.1.4: mu >= half the mean edge)");
   if (!std::isfinite(s.r_eff) || s.r_eff < 0.0) bad("r_eff", s.r_eff, "must be 0 (auto) or a positive length");
   if (s.max_rounds < 1) bad("max_rounds", s.max_rounds, "must be at least 1");
+  if (s.rounds_per_step < 0) bad("rounds_per_step", s.rounds_per_step, "must be at least 0 (0 = until stable)");
   if (!std::isfinite(s.motion_factor) || s.motion_factor < 0.0)
     bad("motion_factor", s.motion_factor, "must be finite and not negative");
   if (s.motion_bound != MotionBound::Radius && s.motion_bound != MotionBound::Swept)

@@ -170,7 +170,9 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
   p_left.assign(n, kInvalidIndex);
   p_dirty.assign(n, 1);
   p_moved.clear();
-  for (int round = 0; round < settings.max_rounds; ++round) {
+  const bool until_stable = settings.flagging == Flagging::Sensors || settings.rounds_per_step == 0;
+  const int rounds = until_stable ? settings.max_rounds : std::min(settings.rounds_per_step, settings.max_rounds);
+  for (int round = 0; round < rounds; ++round) {
     grid.build(particles.pos, reach);
     // A particle that stayed put last round decides the same again unless a particle within its
     // reach moved (from or to a place within reach): only those are evaluated again. Exact.
@@ -234,7 +236,8 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
       particles.pos[i] = particles.body[i]->positions[p_dest[i]];
     }
   }
-  stats.round_cap_hits = 1;
+  // Stopping after rounds_per_step is the plan, not a cap: the particles go on next step.
+  if (until_stable) stats.round_cap_hits = 1;
 }
 
 // ------------------------------------------------------------------------------------------------

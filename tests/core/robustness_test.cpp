@@ -400,6 +400,7 @@ TEST(BadSettings, NegativeOrZeroSizesAreNamed) {
   };
   named("mu_edge_factor", [](SensorSettings& s) { s.mu_edge_factor = 0.0; });
   named("max_rounds", [](SensorSettings& s) { s.max_rounds = 0; });
+  named("rounds_per_step", [](SensorSettings& s) { s.rounds_per_step = -1; });
   named("motion_factor", [](SensorSettings& s) { s.motion_factor = -2.0; });
   named("chunk_vertices", [](SensorSettings& s) { s.chunk_vertices = 0; });
   named("check_every", [](SensorSettings& s) { s.repartition.check_every = 0; });

@@ -202,6 +202,7 @@ std::vector<StepRecord> interlockedUs(const SensorSettings& settings) {
 
 TEST(Switches, NoBacktrackOffLetsHeadOnParticlesSwapUntilTheRoundCap) {
   SensorSettings on;
+  on.rounds_per_step = 0;  // the guard acts within one step's movement until stable
   SensorSettings off = on;
   off.no_backtrack = false;
   // Pure Jacobi (thesis §3.4): two particles passing each other swap back every round, so every
@@ -217,6 +218,7 @@ TEST(Switches, NoBacktrackOffLetsHeadOnParticlesSwapUntilTheRoundCap) {
 
 TEST(Switches, NoBacktrackOffChangesOnlyTheParticlePaths) {
   SensorSettings on;
+  on.rounds_per_step = 0;  // the guard acts within one step's movement until stable
   SensorSettings off = on;
   off.no_backtrack = false;
   {
@@ -252,6 +254,34 @@ TEST(Switches, NoBacktrackOffChangesOnlyTheParticlePaths) {
     EXPECT_GT(different_paths, 0u) << "the guard must have fired in this scene";
     EXPECT_GT(truth, 0u) << "the bodies must touch";
   }
+}
+
+TEST(Switches, OneRoundPerStepWalksTheSamePathAsUntilStableOverSteps) {
+  // Three equal spheres in a row, at rest: moving until stable takes several rounds in the first
+  // step; one round a step (the default) takes the same hops over as many steps, one per step,
+  // and ends on the same vertices. The candidates of the final steps agree as well.
+  TriMesh a = makeSphere(1.0, 600), b = makeSphere(1.0, 600), c = makeSphere(1.0, 600);
+  const double gap = 0.3 * meanEdge(a);
+  b.translate(Vec3(2.0 + gap, 0, 0));
+  c.translate(Vec3(4.0 + 2 * gap, 0, 0));
+  SensorSettings stable;
+  stable.rounds_per_step = 0;
+  SensorSettings tracking;
+  ASSERT_EQ(tracking.rounds_per_step, 1) << "the default";
+  SensorWorld ws(stable), wt(tracking);
+  addAll(ws, {&a, &b, &c}, 0.4 * meanEdge(a));
+  addAll(wt, {&a, &b, &c}, 0.4 * meanEdge(a));
+  const std::vector<StepRecord> once = record(ws, 1);
+  const int rounds = once[0].rounds;
+  ASSERT_GT(rounds, 2) << "the particles must walk several hops";
+  const std::vector<StepRecord> walked = record(wt, rounds);
+  for (const StepRecord& r : walked) {
+    EXPECT_LE(r.rounds, 1);
+    EXPECT_EQ(r.round_cap_hits, 0u) << "stopping after rounds_per_step is not a cap hit";
+  }
+  EXPECT_NE(walked.front().particle_vertices, once[0].particle_vertices) << "one round is not yet there";
+  EXPECT_EQ(walked.back().particle_vertices, once[0].particle_vertices);
+  EXPECT_TRUE(walked.back().candidates == once[0].candidates);
 }
 
 TEST(Memory, MidphaseBytesStayFlatOverALongDeformingRun) {
