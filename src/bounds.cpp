@@ -112,10 +112,10 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
 
 // Area and longest edge of the triangles a chunk owns; their vertices were just read by the refit.
 template <typename T>
-void measureChunk(const MeshTopology& topo, const char* base, std::size_t stride, IndexRange triangles, double& area,
+void measureChunk(const ChunkLists& ch, Index chunk, const char* base, std::size_t stride, double& area,
                   double& max_edge2) {
-  for (Index t : triangles) {
-    const Triangle& tri = topo.triangle(t);
+  for (std::size_t k = ch.triangle_begin[chunk]; k < ch.triangle_begin[chunk + 1]; ++k) {
+    const Triangle tri = ch.triangle(chunk, k);
     const Vec3 a = load<T>(base, stride, tri[0]), b = load<T>(base, stride, tri[1]), c = load<T>(base, stride, tri[2]);
     const Vec3 ab = b - a, ac = c - a, bc = c - b;
     area += 0.5 * ab.cross(ac).norm();
@@ -167,7 +167,7 @@ void refitBounds(Body& b, bool measure, bool swept) {
     finite = finite && std::isfinite(sum);
   } else if (!same_type) {
     for (std::size_t c = 0; c < ch.count(); ++c)
-      for (Index v : ch.vertices.row(static_cast<Index>(c)))
+      for (Index v : ch.vertices(static_cast<Index>(c)))
         b.chunk_box[c].motion = std::max(b.chunk_box[c].motion, b.vertexMotion(v));
   }
   if (!finite) {
@@ -179,9 +179,9 @@ void refitBounds(Body& b, bool measure, bool swept) {
     for (std::size_t c = 0; c < ch.count(); ++c) {
       double& area = b.shape.region_area[ch.region_of[c]];
       if (is_float)
-        measureChunk<float>(*b.topology, base, stride, ch.triangles.row(static_cast<Index>(c)), area, max_edge2);
+        measureChunk<float>(ch, static_cast<Index>(c), base, stride, area, max_edge2);
       else
-        measureChunk<double>(*b.topology, base, stride, ch.triangles.row(static_cast<Index>(c)), area, max_edge2);
+        measureChunk<double>(ch, static_cast<Index>(c), base, stride, area, max_edge2);
     }
     b.shape.max_edge = std::sqrt(max_edge2);
   }
@@ -301,6 +301,7 @@ struct TriangleRec {
   Vec3 lo, hi;
   double nlo, nhi;  ///< extent along the sensor axis
   Index t;
+  Index k;  ///< its place in the chunk lists (ChunkLists::triangle)
 };
 
 struct Scratch {
@@ -329,8 +330,7 @@ struct PairContext {
 /// With MotionBound::Radius the pair must also be within the vertex's radius r now (with a
 /// relative slack for single-precision callers): a surface at rest is all near pairs, and
 /// boxes alone would hand its curved parts to the exact test every step.
-bool excludedSelfPair(const PairContext& ctx, Index v, Index t, double r) {
-  const Triangle& tri = ctx.tb.topology->triangle(t);
+bool excludedSelfPair(const PairContext& ctx, Index v, const Triangle& tri, double r) {
   if (tri[0] == v || tri[1] == v || tri[2] == v) return true;
   if (!ctx.swept) {
     const PositionView& x = ctx.tb.positions;
@@ -345,7 +345,7 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
   if (c.vertices_at >= 0) return;
   c.vertices_at = static_cast<int>(ctx.s.verts.size());
   const bool swept = ctx.swept && !ctx.vb.previous.empty();
-  for (Index v : ctx.vb.chunks.vertices.row(c.chunk)) {
+  for (Index v : ctx.vb.chunks.vertices(c.chunk)) {
     Vec3 x = ctx.vb.positions[v];
     double r = ctx.margin_sum + ctx.motion_factor * ctx.vb.vertexMotion(v);
     if (swept) {
@@ -356,18 +356,19 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
     }
     ctx.s.verts.push_back({x, r, ctx.axis.valid ? ctx.axis.project(x) : 0.0, v});
   }
-  ctx.counters.candidate_vertices += ctx.vb.chunks.vertices.row(c.chunk).size();
+  ctx.counters.candidate_vertices += ctx.vb.chunks.vertices(c.chunk).size();
 }
 
 void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   if (c.triangles_at >= 0) return;
   c.triangles_at = static_cast<int>(ctx.s.tris.size());
-  const MeshTopology& topo = *ctx.tb.topology;
+  const ChunkLists& ch = ctx.tb.chunks;
   const bool swept = ctx.swept && !ctx.tb.previous.empty();
-  for (Index t : ctx.tb.chunks.triangles.row(c.chunk)) {
-    const Triangle& tri = topo.triangle(t);
+  for (std::size_t at = ch.triangle_begin[c.chunk]; at < ch.triangle_begin[c.chunk + 1]; ++at) {
+    const Triangle tri = ch.triangle(c.chunk, at);
     const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], cc = ctx.tb.positions[tri[2]];
-    TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0, t};
+    TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0, ch.triangle_id[at],
+                    static_cast<Index>(at)};
     if (ctx.axis.valid) {
       const double pa = ctx.axis.project(a), pb = ctx.axis.project(b), pc = ctx.axis.project(cc);
       rec.nlo = std::min({pa, pb, pc});
@@ -387,17 +388,17 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
     }
     ctx.s.tris.push_back(rec);
   }
-  ctx.counters.candidate_triangles += ctx.tb.chunks.triangles.row(c.chunk).size();
+  ctx.counters.candidate_triangles += ch.triangleCount(c.chunk);
 }
 
 // Vertices of chunk cv (of ctx.vb) against the triangles owned by chunk ct (of ctx.tb).
 void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
-  const std::size_t nt = ctx.tb.chunks.triangles.row(ct.chunk).size();
+  const std::size_t nt = ctx.tb.chunks.triangleCount(ct.chunk);
   if (nt == 0) return;
   const bool sensors = ctx.axis.valid;
   const MotionBox& tbox = ctx.tb.chunk_box[ct.chunk];
   gatherVertices(ctx, cv);
-  const std::size_t nv = ctx.vb.chunks.vertices.row(cv.chunk).size();
+  const std::size_t nv = ctx.vb.chunks.vertices(cv.chunk).size();
   bool ready = false;
   Scratch& s = ctx.s;
   for (std::size_t i = 0; i < nv; ++i) {
@@ -428,7 +429,7 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       ++ctx.counters.candidate_probes;
       if (sensors && (vr.xn + vr.r < tr.nlo || vr.xn - vr.r > tr.nhi)) continue;
       if (!ballMeetsBox(vr.x, tr.lo, tr.hi, vr.r)) continue;
-      if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, tr.t, vr.r)) {
+      if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, ctx.tb.chunks.triangle(ct.chunk, tr.k), vr.r)) {
         ++ctx.counters.self_excluded_pairs;
         continue;
       }

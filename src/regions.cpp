@@ -105,10 +105,57 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
     for (Index v : tri)
       if (chunk_of[v] != owner) bpairs.emplace_back(v, owner);
   }
-  out.vertices = IndexRows::fromPairs(chunk, vpairs);
-  out.triangles = IndexRows::fromPairs(chunk, tpairs);
-  out.foreign_of = IndexRows::fromPairs(topology.vertexCount(), bpairs);
   out.chunk_of = std::move(chunk_of);
+  out.foreign_of = IndexRows::fromPairs(topology.vertexCount(), bpairs);
+  // Each chunk's table: its own vertices, then the foreign ones its triangles use.
+  for (auto& [v, c] : bpairs) std::swap(v, c);
+  const IndexRows own = IndexRows::fromPairs(chunk, vpairs);
+  const IndexRows foreign = IndexRows::fromPairs(chunk, bpairs);
+  const IndexRows owned = IndexRows::fromPairs(chunk, tpairs);
+  out.table.reserve(own.items.size() + foreign.items.size());
+  out.table_begin.reserve(chunk + 1);
+  out.own_end.reserve(chunk);
+  out.table_begin.push_back(0);
+  for (Index c = 0; c < chunk; ++c) {
+    out.table.insert(out.table.end(), own.row(c).begin(), own.row(c).end());
+    out.own_end.push_back(static_cast<Index>(out.table.size()));
+    out.table.insert(out.table.end(), foreign.row(c).begin(), foreign.row(c).end());
+    out.table_begin.push_back(static_cast<Index>(out.table.size()));
+  }
+  std::size_t longest = 0;
+  for (Index c = 0; c < chunk; ++c) longest = std::max<std::size_t>(longest, out.table_begin[c + 1] - out.table_begin[c]);
+  out.width = longest <= 0x100 ? 1 : longest <= 0x10000 ? 2 : 4;
+  out.triangle_begin = owned.offsets;
+  out.triangle_id = owned.items;
+  out.corners.resize(3 * out.width * owned.items.size());
+  for (Index c = 0; c < chunk; ++c) {
+    const Index* first = out.table.data() + out.table_begin[c];
+    for (std::size_t k = owned.offsets[c]; k < owned.offsets[c + 1]; ++k)
+      for (std::size_t i = 0; i < 3; ++i) {
+        // A vertex is found among the chunk's own vertices or, failing that, its foreign ones.
+        const Index v = topology.triangle(owned.items[k])[i];
+        const Index* mid = out.table.data() + out.own_end[c];
+        const Index* last = out.table.data() + out.table_begin[c + 1];
+        const Index* at = out.chunk_of[v] == c ? std::lower_bound(first, mid, v) : std::lower_bound(mid, last, v);
+        out.setCorner(3 * k + i, static_cast<Index>(at - first));
+      }
+  }
+  out.region_begin.shrink_to_fit();
+  out.region_of.shrink_to_fit();
+  return out;
+}
+
+std::vector<Triangle> ChunkLists::meshTriangles() const {
+  std::vector<Triangle> out(triangle_id.size());
+  for (Index c = 0; c < count(); ++c)
+    for (std::size_t k = triangle_begin[c]; k < triangle_begin[c + 1]; ++k) out[triangle_id[k]] = triangle(c, k);
+  return out;
+}
+
+std::vector<Index> ChunkLists::regionOfVertices() const {
+  std::vector<Index> out(chunk_of.size(), kInvalidIndex);
+  for (std::size_t v = 0; v < chunk_of.size(); ++v)
+    if (chunk_of[v] != kInvalidIndex) out[v] = region_of[chunk_of[v]];
   return out;
 }
 
