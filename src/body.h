@@ -29,6 +29,42 @@ struct RegionLists {
 
 RegionLists buildRegionLists(const MeshTopology& topology, const std::vector<Index>& region_of, std::size_t regions);
 
+/// Indices stored in the fewest bytes (1, 2 or 4) that hold the largest of them.
+class PackedIndices {
+ public:
+  PackedIndices() = default;
+  PackedIndices(std::size_t count, Index largest)
+      : width_(largest <= 0xFFu ? 1 : largest <= 0xFFFFu ? 2 : 4), data_(count * width_) {}
+  Index operator[](std::size_t i) const {
+    if (width_ == 1) return data_[i];
+    if (width_ == 2) {
+      std::uint16_t x;
+      std::memcpy(&x, data_.data() + 2 * i, 2);
+      return x;
+    }
+    Index x;
+    std::memcpy(&x, data_.data() + 4 * i, 4);
+    return x;
+  }
+  void set(std::size_t i, Index x) {
+    if (width_ == 1) {
+      data_[i] = static_cast<std::uint8_t>(x);
+    } else if (width_ == 2) {
+      const auto y = static_cast<std::uint16_t>(x);
+      std::memcpy(data_.data() + 2 * i, &y, 2);
+    } else {
+      std::memcpy(data_.data() + 4 * i, &x, 4);
+    }
+  }
+  unsigned width() const { return width_; }
+  const std::uint8_t* data() const { return data_.data(); }
+  std::size_t bytes() const { return data_.capacity(); }
+
+ private:
+  unsigned width_ = 1;
+  std::vector<std::uint8_t> data_;
+};
+
 /// [beyond] The bounds layer under the regions: each region cut into compact chunks of at most
 /// `chunk_vertices` vertices (median splits along the longest axis). Every triangle belongs to
 /// exactly one chunk (that of its lowest vertex index), so each (vertex, triangle) pair belongs
@@ -37,17 +73,19 @@ RegionLists buildRegionLists(const MeshTopology& topology, const std::vector<Ind
 /// The chunks are also the body's runtime mesh, so that the full MeshTopology (one-ring and
 /// vertex-triangle lists, components) need not stay alive after partitioning: each chunk keeps a
 /// table of the vertices its triangles use, its own vertices first, then its foreign ones (each
-/// part ascending), and its triangles as positions in that table, in `width` bytes each. The
-/// triangles are stored once; a vertex's one ring comes from the triangles of its own and foreign
-/// chunks (forEachTriangleOf).
+/// part ascending), and its triangles as positions in that table. The triangles are stored once;
+/// a vertex's one ring comes from the triangles of its own and foreign chunks (forEachTriangleOf).
+/// A chunk's triangles are numbered close together in most meshes: their mesh indices are kept as
+/// offsets from the chunk's first. Both are PackedIndices: 1 byte per corner and 2 per triangle
+/// index in the benchmark's meshes (docs/DECISIONS.md, "Midphase memory").
 struct ChunkLists {
   std::vector<Index> table;           ///< the chunks' vertex tables, one after the other
   std::vector<Index> table_begin;     ///< chunk c's table is [table_begin[c], table_begin[c+1])
   std::vector<Index> own_end;         ///< its own vertices are [table_begin[c], own_end[c])
   std::vector<Index> triangle_begin;  ///< chunk c owns the triangles [triangle_begin[c], triangle_begin[c+1])
-  std::vector<Index> triangle_id;     ///< mesh index of each owned triangle, ascending in each chunk
-  std::vector<std::uint8_t> corners;  ///< per owned triangle, 3 table positions of `width` bytes
-  unsigned width = 1;                 ///< 1, 2 or 4: the fewest bytes that hold every table position
+  std::vector<Index> triangle_base;   ///< mesh index of chunk c's first triangle (0 when it owns none)
+  PackedIndices triangle_offset;      ///< per owned triangle, its mesh index − triangle_base (ascending)
+  PackedIndices corners;              ///< per owned triangle, its 3 vertices as positions in the table
   std::vector<Index> region_begin;  ///< chunks of region r are [region_begin[r], region_begin[r+1])
   std::vector<Index> region_of;     ///< region of each chunk
   /// The refit streams through the vertices in index order (the positions' memory order):
@@ -55,22 +93,27 @@ struct ChunkLists {
   IndexRows foreign_of;             ///< per vertex, the other chunks whose owned triangles it is in
 
   std::size_t count() const { return table_begin.size() - 1; }
-  std::size_t vertexCount() const { return chunk_of.size(); }
   /// Own vertices of chunk c, ascending.
   IndexRange vertices(Index c) const { return {table.data() + table_begin[c], table.data() + own_end[c]}; }
   std::size_t triangleCount(Index c) const { return triangle_begin[c + 1] - triangle_begin[c]; }
-  /// Owned triangle k (triangle_begin[c] ≤ k < triangle_begin[c+1]) of chunk c, as mesh vertices.
+  /// Owned triangle k (triangle_begin[c] ≤ k < triangle_begin[c+1]) of chunk c: its mesh index,
+  /// and its vertices.
+  Index triangleId(Index c, std::size_t k) const { return triangle_base[c] + triangle_offset[k]; }
   Triangle triangle(Index c, std::size_t k) const {
     const Index* t = table.data() + table_begin[c];
-    return {t[corner(3 * k)], t[corner(3 * k + 1)], t[corner(3 * k + 2)]};
+    return {t[corners[3 * k]], t[corners[3 * k + 1]], t[corners[3 * k + 2]]};
   }
   /// f(t, triangle) for every triangle t that holds vertex v: those owned by v's chunk and by its
   /// foreign chunks. A triangle holding v twice (degenerate) comes once.
   template <class F>
   void forEachTriangleOf(Index v, F&& f) const {
     const auto scan = [&](Index c, Index at) {
+      // The search is the particles' inner loop: one-byte corners are compared in place.
+      const std::uint8_t* bytes = corners.width() == 1 ? corners.data() : nullptr;
       for (std::size_t k = triangle_begin[c]; k < triangle_begin[c + 1]; ++k)
-        if (corner(3 * k) == at || corner(3 * k + 1) == at || corner(3 * k + 2) == at) f(triangle_id[k], triangle(c, k));
+        if (bytes != nullptr ? bytes[3 * k] == at || bytes[3 * k + 1] == at || bytes[3 * k + 2] == at
+                             : corners[3 * k] == at || corners[3 * k + 1] == at || corners[3 * k + 2] == at)
+          f(triangleId(c, k), triangle(c, k));
     };
     const Index own = chunk_of[v];
     if (own == kInvalidIndex) return;
@@ -83,35 +126,11 @@ struct ChunkLists {
   std::vector<Triangle> meshTriangles() const;
   /// The partition's region of every vertex: that of its chunk.
   std::vector<Index> regionOfVertices() const;
-  /// Sets table position i of `corners` (3k + j: corner j of owned triangle k).
-  void setCorner(std::size_t i, Index pos) {
-    if (width == 1) {
-      corners[i] = static_cast<std::uint8_t>(pos);
-    } else if (width == 2) {
-      const auto x = static_cast<std::uint16_t>(pos);
-      std::memcpy(corners.data() + 2 * i, &x, 2);
-    } else {
-      std::memcpy(corners.data() + 4 * i, &pos, 4);
-    }
-  }
   std::size_t bytes() const {
     return (table.capacity() + table_begin.capacity() + own_end.capacity() + triangle_begin.capacity() +
-            triangle_id.capacity() + region_begin.capacity() + region_of.capacity() + chunk_of.capacity()) *
+            triangle_base.capacity() + region_begin.capacity() + region_of.capacity() + chunk_of.capacity()) *
                sizeof(Index) +
-           corners.capacity() + foreign_of.bytes();
-  }
-
- private:
-  Index corner(std::size_t i) const {
-    if (width == 1) return corners[i];
-    if (width == 2) {
-      std::uint16_t x;
-      std::memcpy(&x, corners.data() + 2 * i, 2);
-      return x;
-    }
-    Index x;
-    std::memcpy(&x, corners.data() + 4 * i, 4);
-    return x;
+           triangle_offset.bytes() + corners.bytes() + foreign_of.bytes();
   }
 };
 
@@ -170,6 +189,7 @@ struct Body {
   double max_edge = 0.0;               ///< at (re)partitioning: the stretch trigger's base
   double area_star = 0.0;              ///< A*: largest region area at (re)partitioning
   std::size_t repartitions = 0;
+  std::uint64_t partition_number = 0;  ///< unique in the world for each (re)partitioning
   int steps_since_check = 0;
 
   // Bounds layer (Flagging::SensorsAndBounds), refit every step.

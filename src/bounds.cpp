@@ -367,7 +367,7 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   for (std::size_t at = ch.triangle_begin[c.chunk]; at < ch.triangle_begin[c.chunk + 1]; ++at) {
     const Triangle tri = ch.triangle(c.chunk, at);
     const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], cc = ctx.tb.positions[tri[2]];
-    TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0, ch.triangle_id[at],
+    TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0, ch.triangleId(c.chunk, at),
                     static_cast<Index>(at)};
     if (ctx.axis.valid) {
       const double pa = ctx.axis.project(a), pb = ctx.axis.project(b), pc = ctx.axis.project(cc);

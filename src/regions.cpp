@@ -122,23 +122,30 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
     out.table.insert(out.table.end(), foreign.row(c).begin(), foreign.row(c).end());
     out.table_begin.push_back(static_cast<Index>(out.table.size()));
   }
-  std::size_t longest = 0;
-  for (Index c = 0; c < chunk; ++c) longest = std::max<std::size_t>(longest, out.table_begin[c + 1] - out.table_begin[c]);
-  out.width = longest <= 0x100 ? 1 : longest <= 0x10000 ? 2 : 4;
-  out.triangle_begin = owned.offsets;
-  out.triangle_id = owned.items;
-  out.corners.resize(3 * out.width * owned.items.size());
+  std::size_t longest = 0, span = 0;
   for (Index c = 0; c < chunk; ++c) {
+    longest = std::max<std::size_t>(longest, out.table_begin[c + 1] - out.table_begin[c]);
+    const IndexRange mine = owned.row(c);
+    if (!mine.empty()) span = std::max<std::size_t>(span, mine[mine.size() - 1] - mine[0]);
+  }
+  out.triangle_begin = owned.offsets;
+  out.triangle_base.assign(chunk, 0);
+  out.triangle_offset = PackedIndices(owned.items.size(), static_cast<Index>(span));
+  out.corners = PackedIndices(3 * owned.items.size(), longest == 0 ? 0 : static_cast<Index>(longest - 1));
+  for (Index c = 0; c < chunk; ++c) {
+    if (owned.offsets[c] < owned.offsets[c + 1]) out.triangle_base[c] = owned.items[owned.offsets[c]];
     const Index* first = out.table.data() + out.table_begin[c];
-    for (std::size_t k = owned.offsets[c]; k < owned.offsets[c + 1]; ++k)
+    const Index* mid = out.table.data() + out.own_end[c];
+    const Index* last = out.table.data() + out.table_begin[c + 1];
+    for (std::size_t k = owned.offsets[c]; k < owned.offsets[c + 1]; ++k) {
+      out.triangle_offset.set(k, owned.items[k] - out.triangle_base[c]);
+      // A vertex is among the chunk's own vertices or, failing that, its foreign ones.
       for (std::size_t i = 0; i < 3; ++i) {
-        // A vertex is found among the chunk's own vertices or, failing that, its foreign ones.
         const Index v = topology.triangle(owned.items[k])[i];
-        const Index* mid = out.table.data() + out.own_end[c];
-        const Index* last = out.table.data() + out.table_begin[c + 1];
         const Index* at = out.chunk_of[v] == c ? std::lower_bound(first, mid, v) : std::lower_bound(mid, last, v);
-        out.setCorner(3 * k + i, static_cast<Index>(at - first));
+        out.corners.set(3 * k + i, static_cast<Index>(at - first));
       }
+    }
   }
   out.region_begin.shrink_to_fit();
   out.region_of.shrink_to_fit();
@@ -146,9 +153,9 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
 }
 
 std::vector<Triangle> ChunkLists::meshTriangles() const {
-  std::vector<Triangle> out(triangle_id.size());
+  std::vector<Triangle> out(triangle_begin.back());
   for (Index c = 0; c < count(); ++c)
-    for (std::size_t k = triangle_begin[c]; k < triangle_begin[c + 1]; ++k) out[triangle_id[k]] = triangle(c, k);
+    for (std::size_t k = triangle_begin[c]; k < triangle_begin[c + 1]; ++k) out[triangleId(c, k)] = triangle(c, k);
   return out;
 }
 

@@ -42,7 +42,15 @@ struct SensorWorld::Impl {
   std::vector<char> p_movable;  // it may move this step (see step())
   std::vector<std::pair<Index, Vec3>> p_moved;  // particles moved last round, and where from
   std::vector<Index> near;
-  std::vector<Index> ring;  // a particle's one ring in its region
+  /// A particle's one ring in its region, found through the chunks' triangles and kept while the
+  /// particle stays on that vertex of that partition (most evaluations are of particles that stay).
+  struct Ring {
+    std::uint64_t partition = 0;  // Body::partition_number
+    Index vertex = kInvalidIndex;
+    std::vector<Index> vertices;  // ascending
+  };
+  std::vector<Ring> rings;  // per particle
+  std::uint64_t partitions_made = 0;
   PointHashGrid grid;
   detail::ThesisScratch thesis;
 
@@ -82,6 +90,7 @@ struct SensorWorld::Impl {
   void preparePartitions(StepStats& stats);
   void refitAndCheck(Body& b, StepStats& stats);
   void moveParticles(StepStats& stats, double r_eff);
+  const std::vector<Index>& ringOf(std::size_t particle, const Body& b, Index region, Index v);
 };
 
 void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
@@ -106,6 +115,7 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
   b.area_star = areas.empty() ? 0.0 : *std::max_element(areas.begin(), areas.end());
   b.budget = count;
   b.partitioned = true;
+  b.partition_number = ++partitions_made;
   if (!keepsSetup()) b.dropSetup();
   // Bodies are checked on staggered steps so the O(M) checks do not all land on one step.
   b.steps_since_check = static_cast<int>(b.id % static_cast<BodyId>(settings.repartition.check_every));
@@ -166,6 +176,21 @@ void SensorWorld::Impl::refitAndCheck(Body& b, StepStats& stats) {
   stats.ms_repartition += msSince(t);
 }
 
+const std::vector<Index>& SensorWorld::Impl::ringOf(std::size_t particle, const Body& b, Index region, Index v) {
+  Ring& ring = rings[particle];
+  if (ring.partition == b.partition_number && ring.vertex == v) return ring.vertices;
+  ring.partition = b.partition_number;
+  ring.vertex = v;
+  ring.vertices.clear();
+  b.chunks.forEachTriangleOf(v, [&](Index, const Triangle& tri) {
+    for (Index u : tri)
+      if (u != v && b.chunks.region_of[b.chunks.chunk_of[u]] == region) ring.vertices.push_back(u);
+  });
+  std::sort(ring.vertices.begin(), ring.vertices.end());
+  ring.vertices.erase(std::unique(ring.vertices.begin(), ring.vertices.end()), ring.vertices.end());
+  return ring.vertices;
+}
+
 void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
   const std::size_t n = particles.pos.size();
   double slack = 0.0;  // a candidate vertex lies up to one (stretched) edge from its particle
@@ -177,6 +202,7 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
   const double floor2 = 1e-12 * r_eff2;  // Φ stays finite when two particles coincide
 
   p_dest.resize(n);
+  rings.resize(n);
   p_left.assign(n, kInvalidIndex);
   p_dirty.assign(n, 1);
   p_moved.clear();
@@ -216,17 +242,9 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
         return sum;
       };
       double best = phi(particles.pos[i]);
-      // The one ring of cur in its region, from the triangles that hold cur (the chunks keep them).
-      ring.clear();
-      b.chunks.forEachTriangleOf(cur, [&](Index, const Triangle& tri) {
-        for (Index u : tri)
-          if (u != cur && b.chunks.region_of[b.chunks.chunk_of[u]] == region) ring.push_back(u);
-      });
-      std::sort(ring.begin(), ring.end());
-      ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
       // Neighbours are sorted ascending and only a strictly larger pull moves the particle:
       // ties stay, then lowest index, so runs are deterministic.
-      for (Index u : ring) {
+      for (Index u : ringOf(i, b, region, cur)) {
         if (u == p_left[i]) continue;
         const double f = phi(b.positions[u]);
         if (f > best) {
