@@ -76,15 +76,17 @@ class PackedIndices {
 /// part ascending), and its triangles as positions in that table. The triangles are stored once;
 /// a vertex's one ring comes from the triangles of its own and foreign chunks (forEachTriangleOf).
 /// A chunk's triangles are numbered close together in most meshes: their mesh indices are kept as
-/// offsets from the chunk's first. Both are PackedIndices: 1 byte per corner and 2 per triangle
-/// index in the benchmark's meshes (docs/DECISIONS.md, "Midphase memory").
+/// offsets from a base, modulo the triangle count, so that a chunk across the seam where a grid's
+/// numbering wraps around (index 0 beside the last) is close too. Both are PackedIndices: 1 byte
+/// per corner and 2 per triangle index in the benchmark's meshes (docs/DECISIONS.md, "Midphase
+/// memory").
 struct ChunkLists {
   std::vector<Index> table;           ///< the chunks' vertex tables, one after the other
   std::vector<Index> table_begin;     ///< chunk c's table is [table_begin[c], table_begin[c+1])
   std::vector<Index> own_end;         ///< its own vertices are [table_begin[c], own_end[c])
   std::vector<Index> triangle_begin;  ///< chunk c owns the triangles [triangle_begin[c], triangle_begin[c+1])
-  std::vector<Index> triangle_base;   ///< mesh index of chunk c's first triangle (0 when it owns none)
-  PackedIndices triangle_offset;      ///< per owned triangle, its mesh index − triangle_base (ascending)
+  std::vector<Index> triangle_base;   ///< per chunk, the mesh index its triangles' offsets start from
+  PackedIndices triangle_offset;      ///< per owned triangle, (mesh index − base) mod triangle count
   PackedIndices corners;              ///< per owned triangle, its 3 vertices as positions in the table
   std::vector<Index> region_begin;  ///< chunks of region r are [region_begin[r], region_begin[r+1])
   std::vector<Index> region_of;     ///< region of each chunk
@@ -98,7 +100,10 @@ struct ChunkLists {
   std::size_t triangleCount(Index c) const { return triangle_begin[c + 1] - triangle_begin[c]; }
   /// Owned triangle k (triangle_begin[c] ≤ k < triangle_begin[c+1]) of chunk c: its mesh index,
   /// and its vertices.
-  Index triangleId(Index c, std::size_t k) const { return triangle_base[c] + triangle_offset[k]; }
+  Index triangleId(Index c, std::size_t k) const {
+    const Index base = triangle_base[c], offset = triangle_offset[k], total = triangle_begin.back();
+    return offset < total - base ? base + offset : offset - (total - base);
+  }
   Triangle triangle(Index c, std::size_t k) const {
     const Index* t = table.data() + table_begin[c];
     return {t[corners[3 * k]], t[corners[3 * k + 1]], t[corners[3 * k + 2]]};

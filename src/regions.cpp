@@ -122,23 +122,34 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
     out.table.insert(out.table.end(), foreign.row(c).begin(), foreign.row(c).end());
     out.table_begin.push_back(static_cast<Index>(out.table.size()));
   }
+  // A chunk's base is the index after the largest gap between its triangles' indices, counted
+  // around (modulo the triangle count): its offsets then span the rest.
+  const Index total = static_cast<Index>(topology.triangleCount());
+  out.triangle_base.assign(chunk, 0);
   std::size_t longest = 0, span = 0;
   for (Index c = 0; c < chunk; ++c) {
     longest = std::max<std::size_t>(longest, out.table_begin[c + 1] - out.table_begin[c]);
     const IndexRange mine = owned.row(c);
-    if (!mine.empty()) span = std::max<std::size_t>(span, mine[mine.size() - 1] - mine[0]);
+    if (mine.empty()) continue;
+    std::size_t gap = mine[0] + total - mine[mine.size() - 1], after = 0;
+    for (std::size_t k = 1; k < mine.size(); ++k)
+      if (mine[k] - mine[k - 1] > gap) {
+        gap = mine[k] - mine[k - 1];
+        after = k;
+      }
+    out.triangle_base[c] = mine[after];
+    span = std::max<std::size_t>(span, total - gap);
   }
   out.triangle_begin = owned.offsets;
-  out.triangle_base.assign(chunk, 0);
   out.triangle_offset = PackedIndices(owned.items.size(), static_cast<Index>(span));
   out.corners = PackedIndices(3 * owned.items.size(), longest == 0 ? 0 : static_cast<Index>(longest - 1));
   for (Index c = 0; c < chunk; ++c) {
-    if (owned.offsets[c] < owned.offsets[c + 1]) out.triangle_base[c] = owned.items[owned.offsets[c]];
     const Index* first = out.table.data() + out.table_begin[c];
     const Index* mid = out.table.data() + out.own_end[c];
     const Index* last = out.table.data() + out.table_begin[c + 1];
     for (std::size_t k = owned.offsets[c]; k < owned.offsets[c + 1]; ++k) {
-      out.triangle_offset.set(k, owned.items[k] - out.triangle_base[c]);
+      const Index base = out.triangle_base[c];
+      out.triangle_offset.set(k, owned.items[k] >= base ? owned.items[k] - base : owned.items[k] + (total - base));
       // A vertex is among the chunk's own vertices or, failing that, its foreign ones.
       for (std::size_t i = 0; i < 3; ++i) {
         const Index v = topology.triangle(owned.items[k])[i];
