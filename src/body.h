@@ -7,6 +7,9 @@
 #include "psc/types.h"
 #include "psc/world.h"
 
+#include <algorithm>
+#include <cstdint>
+#include <cstring>
 #include <memory>
 #include <optional>
 #include <string>
@@ -26,22 +29,113 @@ struct RegionLists {
 
 RegionLists buildRegionLists(const MeshTopology& topology, const std::vector<Index>& region_of, std::size_t regions);
 
+/// Indices stored in the fewest bytes (1, 2 or 4) that hold the largest of them.
+class PackedIndices {
+ public:
+  PackedIndices() = default;
+  PackedIndices(std::size_t count, Index largest)
+      : width_(largest <= 0xFFu ? 1 : largest <= 0xFFFFu ? 2 : 4), data_(count * width_) {}
+  Index operator[](std::size_t i) const {
+    if (width_ == 1) return data_[i];
+    if (width_ == 2) {
+      std::uint16_t x;
+      std::memcpy(&x, data_.data() + 2 * i, 2);
+      return x;
+    }
+    Index x;
+    std::memcpy(&x, data_.data() + 4 * i, 4);
+    return x;
+  }
+  void set(std::size_t i, Index x) {
+    if (width_ == 1) {
+      data_[i] = static_cast<std::uint8_t>(x);
+    } else if (width_ == 2) {
+      const auto y = static_cast<std::uint16_t>(x);
+      std::memcpy(data_.data() + 2 * i, &y, 2);
+    } else {
+      std::memcpy(data_.data() + 4 * i, &x, 4);
+    }
+  }
+  unsigned width() const { return width_; }
+  const std::uint8_t* data() const { return data_.data(); }
+  std::size_t bytes() const { return data_.capacity(); }
+
+ private:
+  unsigned width_ = 1;
+  std::vector<std::uint8_t> data_;
+};
+
 /// [beyond] The bounds layer under the regions: each region cut into compact chunks of at most
 /// `chunk_vertices` vertices (median splits along the longest axis). Every triangle belongs to
 /// exactly one chunk (that of its lowest vertex index), so each (vertex, triangle) pair belongs
 /// to exactly one (chunk, chunk) pair and candidate pairs come out unique without sorting.
+///
+/// The chunks are also the body's runtime mesh, so that the full MeshTopology (one-ring and
+/// vertex-triangle lists, components) need not stay alive after partitioning: each chunk keeps a
+/// table of the vertices its triangles use, its own vertices first, then its foreign ones (each
+/// part ascending), and its triangles as positions in that table. The triangles are stored once;
+/// a vertex's one ring comes from the triangles of its own and foreign chunks (forEachTriangleOf).
+/// A chunk's triangles are numbered close together in most meshes: their mesh indices are kept as
+/// offsets from a base, modulo the triangle count, so that a chunk across the seam where a grid's
+/// numbering wraps around (index 0 beside the last) is close too. Both are PackedIndices: 1 byte
+/// per corner and 2 per triangle index in the benchmark's meshes (docs/DECISIONS.md, "Midphase
+/// memory").
 struct ChunkLists {
-  IndexRows vertices;         ///< own vertices of each chunk
-  IndexRows triangles;        ///< triangles owned by each chunk
+  std::vector<Index> table;           ///< the chunks' vertex tables, one after the other
+  std::vector<Index> table_begin;     ///< chunk c's table is [table_begin[c], table_begin[c+1])
+  std::vector<Index> own_end;         ///< its own vertices are [table_begin[c], own_end[c])
+  std::vector<Index> triangle_begin;  ///< chunk c owns the triangles [triangle_begin[c], triangle_begin[c+1])
+  std::vector<Index> triangle_base;   ///< per chunk, the mesh index its triangles' offsets start from
+  PackedIndices triangle_offset;      ///< per owned triangle, (mesh index − base) mod triangle count
+  PackedIndices corners;              ///< per owned triangle, its 3 vertices as positions in the table
   std::vector<Index> region_begin;  ///< chunks of region r are [region_begin[r], region_begin[r+1])
   std::vector<Index> region_of;     ///< region of each chunk
   /// The refit streams through the vertices in index order (the positions' memory order):
-  std::vector<Index> chunk_of;      ///< chunk owning each vertex (kInvalidIndex: in no triangle)
+  std::vector<Index> chunk_of;      ///< chunk owning each vertex (kInvalidIndex: in no chunk)
   IndexRows foreign_of;             ///< per vertex, the other chunks whose owned triangles it is in
-  std::size_t count() const { return vertices.rows(); }
+
+  std::size_t count() const { return table_begin.size() - 1; }
+  /// Own vertices of chunk c, ascending.
+  IndexRange vertices(Index c) const { return {table.data() + table_begin[c], table.data() + own_end[c]}; }
+  std::size_t triangleCount(Index c) const { return triangle_begin[c + 1] - triangle_begin[c]; }
+  /// Owned triangle k (triangle_begin[c] ≤ k < triangle_begin[c+1]) of chunk c: its mesh index,
+  /// and its vertices.
+  Index triangleId(Index c, std::size_t k) const {
+    const Index base = triangle_base[c], offset = triangle_offset[k], total = triangle_begin.back();
+    return offset < total - base ? base + offset : offset - (total - base);
+  }
+  Triangle triangle(Index c, std::size_t k) const {
+    const Index* t = table.data() + table_begin[c];
+    return {t[corners[3 * k]], t[corners[3 * k + 1]], t[corners[3 * k + 2]]};
+  }
+  /// f(t, triangle) for every triangle t that holds vertex v: those owned by v's chunk and by its
+  /// foreign chunks. A triangle holding v twice (degenerate) comes once.
+  template <class F>
+  void forEachTriangleOf(Index v, F&& f) const {
+    const auto scan = [&](Index c, Index at) {
+      // The search is the particles' inner loop: one-byte corners are compared in place.
+      const std::uint8_t* bytes = corners.width() == 1 ? corners.data() : nullptr;
+      for (std::size_t k = triangle_begin[c]; k < triangle_begin[c + 1]; ++k)
+        if (bytes != nullptr ? bytes[3 * k] == at || bytes[3 * k + 1] == at || bytes[3 * k + 2] == at
+                             : corners[3 * k] == at || corners[3 * k + 1] == at || corners[3 * k + 2] == at)
+          f(triangleId(c, k), triangle(c, k));
+    };
+    const Index own = chunk_of[v];
+    if (own == kInvalidIndex) return;
+    const Index* t = table.data();
+    scan(own, static_cast<Index>(std::lower_bound(t + table_begin[own], t + own_end[own], v) - (t + table_begin[own])));
+    for (Index c : foreign_of.row(v))
+      scan(c, static_cast<Index>(std::lower_bound(t + own_end[c], t + table_begin[c + 1], v) - (t + table_begin[c])));
+  }
+  /// The mesh's triangles in their original order (to rebuild the full topology).
+  std::vector<Triangle> meshTriangles() const;
+  /// The partition's region of every vertex: that of its chunk.
+  std::vector<Index> regionOfVertices() const;
   std::size_t bytes() const {
-    return vertices.bytes() + triangles.bytes() + foreign_of.bytes() +
-           (region_begin.capacity() + region_of.capacity() + chunk_of.capacity()) * sizeof(Index);
+    return (table.capacity() + table_begin.capacity() + own_end.capacity() + triangle_begin.capacity() +
+            triangle_base.capacity() + region_begin.capacity() + region_of.capacity() + chunk_of.capacity()) *
+               sizeof(Index) +
+           triangle_offset.bytes() + corners.bytes() + foreign_of.bytes();
   }
 };
 
@@ -72,7 +166,12 @@ inline bool flaggedLess(const FlaggedPair& a, const FlaggedPair& b) {
 struct Body {
   BodyId id = kInvalidBody;
   std::string name;
+  /// The full topology (one rings, vertex triangles, components) is a setup structure: built by
+  /// addBody and kept until the body is partitioned, then dropped unless the settings need it
+  /// every step (thesis mode, the four-direction walk). Partitioning again and inspection rebuild
+  /// it from the chunks (fullTopology) until the next step.
   std::optional<MeshTopology> topology;
+  std::size_t vertex_count = 0;
   PositionView positions;
   PositionView previous;
   double margin = 0.0;
@@ -88,13 +187,14 @@ struct Body {
   // Partition state; valid when `partitioned`.
   bool partitioned = false;
   std::size_t budget = 0;
-  Partition partition;
+  Partition partition;                 ///< its region_of is dropped and rebuilt like `topology`
   RegionLists regions;                 ///< built only for Flagging::Sensors (thesis candidate sets)
   std::vector<Index> particle_vertex;  ///< one per region
   double mean_edge = 0.0;              ///< at (re)partitioning: μ's geometric base
   double max_edge = 0.0;               ///< at (re)partitioning: the stretch trigger's base
   double area_star = 0.0;              ///< A*: largest region area at (re)partitioning
   std::size_t repartitions = 0;
+  std::uint64_t partition_number = 0;  ///< unique in the world for each (re)partitioning
   int steps_since_check = 0;
 
   // Bounds layer (Flagging::SensorsAndBounds), refit every step.
@@ -107,6 +207,22 @@ struct Body {
   std::string label() const { return name.empty() ? "body #" + std::to_string(id) : "body '" + name + "'"; }
   std::size_t regionCount() const { return particle_vertex.size(); }
   double vertexMotion(Index v) const { return previous.empty() ? 0.0 : (positions[v] - previous[v]).norm(); }
+
+  /// The full topology, rebuilt from the chunks if it was dropped (same triangles, same order).
+  const MeshTopology& fullTopology() {
+    if (!topology) topology.emplace(chunks.meshTriangles(), vertex_count);
+    return *topology;
+  }
+  /// The partition with its region_of, rebuilt from the chunks if it was dropped (once partitioned).
+  const Partition& fullPartition() {
+    if (partition.region_of.empty()) partition.region_of = chunks.regionOfVertices();
+    return partition;
+  }
+  /// Drops what only (re)partitioning and inspection read; both rebuild it from the chunks.
+  void dropSetup() {
+    topology.reset();
+    partition.region_of = std::vector<Index>{};
+  }
 };
 
 }  // namespace psc::detail

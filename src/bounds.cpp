@@ -103,18 +103,15 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
   }
 }
 
-// Area of each region's triangles and the longest edge, in triangle order: a mesh's triangles and
-// their vertices come in about the same order, so this reads the positions nearly in memory order
-// (in chunk order it was a random walk, 40% of the refit at 8 x 50k vertices). A triangle counts
-// for the region of its owning chunk, the chunk of its lowest vertex.
+// Area and longest edge of the triangles a chunk owns; their vertices were just read by the refit.
 template <typename T>
-void measureTriangles(const MeshTopology& topo, const ChunkLists& ch, const char* base, std::size_t stride,
-                      std::vector<double>& region_area, double& max_edge2) {
-  for (std::size_t t = 0; t < topo.triangleCount(); ++t) {
-    const Triangle& tri = topo.triangle(t);
+void measureChunk(const ChunkLists& ch, Index chunk, const char* base, std::size_t stride, double& area,
+                  double& max_edge2) {
+  for (std::size_t k = ch.triangle_begin[chunk]; k < ch.triangle_begin[chunk + 1]; ++k) {
+    const Triangle tri = ch.triangle(chunk, k);
     const Vec3 a = load<T>(base, stride, tri[0]), b = load<T>(base, stride, tri[1]), c = load<T>(base, stride, tri[2]);
     const Vec3 ab = b - a, ac = c - a, bc = c - b;
-    region_area[ch.region_of[ch.chunk_of[std::min({tri[0], tri[1], tri[2]})]]] += 0.5 * ab.cross(ac).norm();
+    area += 0.5 * ab.cross(ac).norm();
     max_edge2 = std::max({max_edge2, ab.squaredNorm(), ac.squaredNorm(), bc.squaredNorm()});
   }
 }
@@ -163,7 +160,7 @@ void refitBounds(Body& b, bool measure, bool swept) {
     finite = finite && std::isfinite(sum);
   } else if (!same_type) {
     for (std::size_t c = 0; c < ch.count(); ++c)
-      for (Index v : ch.vertices.row(static_cast<Index>(c)))
+      for (Index v : ch.vertices(static_cast<Index>(c)))
         b.chunk_box[c].motion = std::max(b.chunk_box[c].motion, b.vertexMotion(v));
   }
   if (!finite) {
@@ -172,10 +169,13 @@ void refitBounds(Body& b, bool measure, bool swept) {
   }
   if (measure) {
     double max_edge2 = 0.0;
-    if (is_float)
-      measureTriangles<float>(*b.topology, ch, base, stride, b.shape.region_area, max_edge2);
-    else
-      measureTriangles<double>(*b.topology, ch, base, stride, b.shape.region_area, max_edge2);
+    for (std::size_t c = 0; c < ch.count(); ++c) {
+      double& area = b.shape.region_area[ch.region_of[c]];
+      if (is_float)
+        measureChunk<float>(ch, static_cast<Index>(c), base, stride, area, max_edge2);
+      else
+        measureChunk<double>(ch, static_cast<Index>(c), base, stride, area, max_edge2);
+    }
     b.shape.max_edge = std::sqrt(max_edge2);
   }
   for (Index r = 0; r < b.regionCount(); ++r) {
@@ -311,6 +311,7 @@ struct TriangleRec {
 struct TriangleCorners {
   Vec3 a, b, c;  ///< corners at the current positions (the distance test with MotionBound::Radius)
   Index t;
+  Index k;  ///< its place in the chunk lists (ChunkLists::triangle)
 };
 
 struct Scratch {
@@ -337,8 +338,7 @@ struct PairContext {
 
 /// Self-collision's exclusion rule: the triangle holds the vertex, or the two were within the
 /// exclusion distance in the body's rest shape.
-bool excludedSelfPair(const PairContext& ctx, Index v, Index t) {
-  const Triangle& tri = ctx.tb.topology->triangle(t);
+bool excludedSelfPair(const PairContext& ctx, Index v, const Triangle& tri) {
   if (tri[0] == v || tri[1] == v || tri[2] == v) return true;
   const std::vector<Vec3>& rest = ctx.tb.rest;
   return pointTriangleDistance2(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) < ctx.self_exclude2;
@@ -348,7 +348,7 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
   if (c.vertices_at >= 0) return;
   c.vertices_at = static_cast<int>(ctx.s.verts.size());
   const bool swept = ctx.swept && !ctx.vb.previous.empty();
-  for (Index v : ctx.vb.chunks.vertices.row(c.chunk)) {
+  for (Index v : ctx.vb.chunks.vertices(c.chunk)) {
     Vec3 x = ctx.vb.positions[v];
     double r = ctx.margin_sum + ctx.motion_factor * ctx.vb.vertexMotion(v);
     if (swept) {
@@ -359,16 +359,16 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
     }
     ctx.s.verts.push_back({x, r, ctx.axis.valid ? ctx.axis.project(x) : 0.0, v, swept ? 0.0 : reachOf(x, r)});
   }
-  ctx.counters.candidate_vertices += ctx.vb.chunks.vertices.row(c.chunk).size();
+  ctx.counters.candidate_vertices += ctx.vb.chunks.vertices(c.chunk).size();
 }
 
 void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   if (c.triangles_at >= 0) return;
   c.triangles_at = static_cast<int>(ctx.s.tris.size());
-  const MeshTopology& topo = *ctx.tb.topology;
+  const ChunkLists& ch = ctx.tb.chunks;
   const bool swept = ctx.swept && !ctx.tb.previous.empty();
-  for (Index t : ctx.tb.chunks.triangles.row(c.chunk)) {
-    const Triangle& tri = topo.triangle(t);
+  for (std::size_t at = ch.triangle_begin[c.chunk]; at < ch.triangle_begin[c.chunk + 1]; ++at) {
+    const Triangle tri = ch.triangle(c.chunk, at);
     const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], cc = ctx.tb.positions[tri[2]];
     TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0};
     if (ctx.axis.valid) {
@@ -389,19 +389,19 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
       }
     }
     ctx.s.tris.push_back(rec);
-    ctx.s.corners.push_back({a, b, cc, t});
+    ctx.s.corners.push_back({a, b, cc, ch.triangleId(c.chunk, at), static_cast<Index>(at)});
   }
-  ctx.counters.candidate_triangles += ctx.tb.chunks.triangles.row(c.chunk).size();
+  ctx.counters.candidate_triangles += ch.triangleCount(c.chunk);
 }
 
 // Vertices of chunk cv (of ctx.vb) against the triangles owned by chunk ct (of ctx.tb).
 void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
-  const std::size_t nt = ctx.tb.chunks.triangles.row(ct.chunk).size();
+  const std::size_t nt = ctx.tb.chunks.triangleCount(ct.chunk);
   if (nt == 0) return;
   const bool sensors = ctx.axis.valid;
   const MotionBox& tbox = ctx.tb.chunk_box[ct.chunk];
   gatherVertices(ctx, cv);
-  const std::size_t nv = ctx.vb.chunks.vertices.row(cv.chunk).size();
+  const std::size_t nv = ctx.vb.chunks.vertices(cv.chunk).size();
   bool ready = false;
   Scratch& s = ctx.s;
   std::size_t probes = 0;
@@ -448,7 +448,7 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
         ++ctx.counters.candidates_beyond_reach;
         continue;
       }
-      if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, tc.t)) {
+      if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, ctx.tb.chunks.triangle(ct.chunk, tc.k))) {
         ++ctx.counters.self_excluded_pairs;
         continue;
       }

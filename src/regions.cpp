@@ -109,10 +109,75 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
     for (Index v : tri)
       if (chunk_of[v] != owner) bpairs.emplace_back(v, owner);
   }
-  out.vertices = IndexRows::fromPairs(chunk, vpairs);
-  out.triangles = IndexRows::fromPairs(chunk, tpairs);
-  out.foreign_of = IndexRows::fromPairs(topology.vertexCount(), bpairs);
   out.chunk_of = std::move(chunk_of);
+  out.foreign_of = IndexRows::fromPairs(topology.vertexCount(), bpairs);
+  // Each chunk's table: its own vertices, then the foreign ones its triangles use.
+  for (auto& [v, c] : bpairs) std::swap(v, c);
+  const IndexRows own = IndexRows::fromPairs(chunk, vpairs);
+  const IndexRows foreign = IndexRows::fromPairs(chunk, bpairs);
+  const IndexRows owned = IndexRows::fromPairs(chunk, tpairs);
+  out.table.reserve(own.items.size() + foreign.items.size());
+  out.table_begin.reserve(chunk + 1);
+  out.own_end.reserve(chunk);
+  out.table_begin.push_back(0);
+  for (Index c = 0; c < chunk; ++c) {
+    out.table.insert(out.table.end(), own.row(c).begin(), own.row(c).end());
+    out.own_end.push_back(static_cast<Index>(out.table.size()));
+    out.table.insert(out.table.end(), foreign.row(c).begin(), foreign.row(c).end());
+    out.table_begin.push_back(static_cast<Index>(out.table.size()));
+  }
+  // A chunk's base is the index after the largest gap between its triangles' indices, counted
+  // around (modulo the triangle count): its offsets then span the rest.
+  const Index total = static_cast<Index>(topology.triangleCount());
+  out.triangle_base.assign(chunk, 0);
+  std::size_t longest = 0, span = 0;
+  for (Index c = 0; c < chunk; ++c) {
+    longest = std::max<std::size_t>(longest, out.table_begin[c + 1] - out.table_begin[c]);
+    const IndexRange mine = owned.row(c);
+    if (mine.empty()) continue;
+    std::size_t gap = mine[0] + total - mine[mine.size() - 1], after = 0;
+    for (std::size_t k = 1; k < mine.size(); ++k)
+      if (mine[k] - mine[k - 1] > gap) {
+        gap = mine[k] - mine[k - 1];
+        after = k;
+      }
+    out.triangle_base[c] = mine[after];
+    span = std::max<std::size_t>(span, total - gap);
+  }
+  out.triangle_begin = owned.offsets;
+  out.triangle_offset = PackedIndices(owned.items.size(), static_cast<Index>(span));
+  out.corners = PackedIndices(3 * owned.items.size(), longest == 0 ? 0 : static_cast<Index>(longest - 1));
+  for (Index c = 0; c < chunk; ++c) {
+    const Index* first = out.table.data() + out.table_begin[c];
+    const Index* mid = out.table.data() + out.own_end[c];
+    const Index* last = out.table.data() + out.table_begin[c + 1];
+    for (std::size_t k = owned.offsets[c]; k < owned.offsets[c + 1]; ++k) {
+      const Index base = out.triangle_base[c];
+      out.triangle_offset.set(k, owned.items[k] >= base ? owned.items[k] - base : owned.items[k] + (total - base));
+      // A vertex is among the chunk's own vertices or, failing that, its foreign ones.
+      for (std::size_t i = 0; i < 3; ++i) {
+        const Index v = topology.triangle(owned.items[k])[i];
+        const Index* at = out.chunk_of[v] == c ? std::lower_bound(first, mid, v) : std::lower_bound(mid, last, v);
+        out.corners.set(3 * k + i, static_cast<Index>(at - first));
+      }
+    }
+  }
+  out.region_begin.shrink_to_fit();
+  out.region_of.shrink_to_fit();
+  return out;
+}
+
+std::vector<Triangle> ChunkLists::meshTriangles() const {
+  std::vector<Triangle> out(triangle_begin.back());
+  for (Index c = 0; c < count(); ++c)
+    for (std::size_t k = triangle_begin[c]; k < triangle_begin[c + 1]; ++k) out[triangleId(c, k)] = triangle(c, k);
+  return out;
+}
+
+std::vector<Index> ChunkLists::regionOfVertices() const {
+  std::vector<Index> out(chunk_of.size(), kInvalidIndex);
+  for (std::size_t v = 0; v < chunk_of.size(); ++v)
+    if (chunk_of[v] != kInvalidIndex) out[v] = region_of[chunk_of[v]];
   return out;
 }
 

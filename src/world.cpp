@@ -42,6 +42,15 @@ struct SensorWorld::Impl {
   std::vector<char> p_movable;  // it may move this step (see step())
   std::vector<std::pair<Index, Vec3>> p_moved;  // particles moved last round, and where from
   std::vector<Index> near;
+  /// A particle's one ring in its region, found through the chunks' triangles and kept while the
+  /// particle stays on that vertex of that partition (most evaluations are of particles that stay).
+  struct Ring {
+    std::uint64_t partition = 0;  // Body::partition_number
+    Index vertex = kInvalidIndex;
+    std::vector<Index> vertices;  // ascending
+  };
+  std::vector<Ring> rings;  // per particle
+  std::uint64_t partitions_made = 0;
   PointHashGrid grid;
   detail::ThesisScratch thesis;
 
@@ -70,22 +79,31 @@ struct SensorWorld::Impl {
     return std::max(r, 1.01 * max_mu + 1e-12);
   }
 
+  /// Whether the full topology and the partition's region_of stay alive after partitioning: the
+  /// thesis's candidate sets and the four-direction walk read them every step. Otherwise the chunks
+  /// are all the steps need (Body::topology).
+  bool keepsSetup() const {
+    return settings.flagging == Flagging::Sensors || settings.repartition.estimator == AreaEstimator::FourDirectionWalk;
+  }
+
   void partitionBody(Body& b, std::size_t count);
   void preparePartitions(StepStats& stats);
   void refitAndCheck(Body& b, StepStats& stats);
   void moveParticles(StepStats& stats, double r_eff);
+  const std::vector<Index>& ringOf(std::size_t particle, const Body& b, Index region, Index v);
 };
 
 void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
   const bool again = b.partitioned;
-  b.partition = partitionLBG(*b.topology, b.positions, count, settings.partition);
+  const MeshTopology& topology = b.fullTopology();
+  b.partition = partitionLBG(topology, b.positions, count, settings.partition);
   // The thesis's candidate sets need per-region lists; the bounds layer needs only the chunks.
   b.regions = settings.flagging == Flagging::Sensors
-                  ? detail::buildRegionLists(*b.topology, b.partition.region_of, b.partition.regionCount())
+                  ? detail::buildRegionLists(topology, b.partition.region_of, b.partition.regionCount())
                   : detail::RegionLists{};
   b.particle_vertex = b.partition.seed_vertex;
-  b.mean_edge = edgeStats(*b.topology, b.positions).mean;
-  b.chunks = detail::buildChunks(*b.topology, b.positions, b.partition.region_of, b.partition.regionCount(),
+  b.mean_edge = edgeStats(topology, b.positions).mean;
+  b.chunks = detail::buildChunks(topology, b.positions, b.partition.region_of, b.partition.regionCount(),
                                  settings.chunk_vertices);
   // The repartition check compares with what the same refit measures now (A* and the longest edge).
   detail::refitBounds(b, true, settings.motion_bound == MotionBound::Swept);
@@ -93,10 +111,12 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
   const std::vector<double> areas =
       settings.repartition.estimator == AreaEstimator::TrueArea
           ? b.shape.region_area
-          : regionAreas(*b.topology, b.positions, b.partition, b.particle_vertex, settings.repartition.estimator);
+          : regionAreas(topology, b.positions, b.partition, b.particle_vertex, settings.repartition.estimator);
   b.area_star = areas.empty() ? 0.0 : *std::max_element(areas.begin(), areas.end());
   b.budget = count;
   b.partitioned = true;
+  b.partition_number = ++partitions_made;
+  if (!keepsSetup()) b.dropSetup();
   // Bodies are checked on staggered steps so the O(M) checks do not all land on one step.
   b.steps_since_check = static_cast<int>(b.id % static_cast<BodyId>(settings.repartition.check_every));
   if (again) ++b.repartitions;
@@ -111,7 +131,7 @@ void SensorWorld::Impl::preparePartitions(StepStats& stats) {
   for (auto& kv : bodies) {
     Body& b = *kv.second;
     if (!b.parts)
-      b.parts = std::make_shared<const ConvexParts>(decomposeConvex(*b.topology, b.positions, settings.decomposition));
+      b.parts = std::make_shared<const ConvexParts>(decomposeConvex(b.fullTopology(), b.positions, settings.decomposition));
     budget_in.push_back({*b.parts, b.particle_override});
   }
   const std::vector<std::size_t> budget = particleBudget(budget_in);
@@ -146,7 +166,7 @@ void SensorWorld::Impl::refitAndCheck(Body& b, StepStats& stats) {
     const std::vector<double> areas =
         rs.estimator == AreaEstimator::TrueArea
             ? b.shape.region_area
-            : regionAreas(*b.topology, b.positions, b.partition, b.particle_vertex, rs.estimator);
+            : regionAreas(b.fullTopology(), b.positions, b.fullPartition(), b.particle_vertex, rs.estimator);
     trigger = !areas.empty() && *std::max_element(areas.begin(), areas.end()) > rs.area_trigger * b.area_star;
   }
   if (trigger) {
@@ -154,6 +174,21 @@ void SensorWorld::Impl::refitAndCheck(Body& b, StepStats& stats) {
     ++stats.repartitions;
   }
   stats.ms_repartition += msSince(t);
+}
+
+const std::vector<Index>& SensorWorld::Impl::ringOf(std::size_t particle, const Body& b, Index region, Index v) {
+  Ring& ring = rings[particle];
+  if (ring.partition == b.partition_number && ring.vertex == v) return ring.vertices;
+  ring.partition = b.partition_number;
+  ring.vertex = v;
+  ring.vertices.clear();
+  b.chunks.forEachTriangleOf(v, [&](Index, const Triangle& tri) {
+    for (Index u : tri)
+      if (u != v && b.chunks.region_of[b.chunks.chunk_of[u]] == region) ring.vertices.push_back(u);
+  });
+  std::sort(ring.vertices.begin(), ring.vertices.end());
+  ring.vertices.erase(std::unique(ring.vertices.begin(), ring.vertices.end()), ring.vertices.end());
+  return ring.vertices;
 }
 
 void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
@@ -167,6 +202,7 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
   const double floor2 = 1e-12 * r_eff2;  // Φ stays finite when two particles coincide
 
   p_dest.resize(n);
+  rings.resize(n);
   p_left.assign(n, kInvalidIndex);
   p_dirty.assign(n, 1);
   p_moved.clear();
@@ -210,8 +246,8 @@ void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
       double best = phi(particles.pos[i]);
       // Neighbours are sorted ascending and only a strictly larger pull moves the particle:
       // ties stay, then lowest index, so runs are deterministic.
-      for (Index u : b.topology->neighbors(cur)) {
-        if (b.partition.region_of[u] != region || u == p_left[i]) continue;
+      for (Index u : ringOf(i, b, region, cur)) {
+        if (u == p_left[i]) continue;
         const double f = phi(b.positions[u]);
         if (f > best) {
           best = f;
@@ -276,6 +312,7 @@ std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
   } catch (const Error& e) {
     throw Error(e.code(), label + ": " + std::string(e.what()).substr(std::string(toString(e.code())).size() + 2));
   }
+  b->vertex_count = desc.positions.size();
   b->report = validate(*b->topology, desc.positions, label);
   if (b->report.degenerate_triangles == b->topology->triangleCount())
     throw Error(ErrorCode::InvalidMesh, label + ": all " + std::to_string(b->topology->triangleCount()) +
@@ -342,10 +379,10 @@ std::vector<BodyId> SensorWorld::bodyIds() const {
 
 void SensorWorld::setPositions(BodyId id, const PositionView& positions, const PositionView& previous) {
   Body& b = impl_->get(id);
-  if (positions.size() != b.topology->vertexCount() || positions.empty())
+  if (positions.size() != b.vertex_count || positions.empty())
     throw Error(ErrorCode::InvalidArgument, b.label() + ": setPositions got " + std::to_string(positions.size()) +
-                                                " vertices but the mesh has " +
-                                                std::to_string(b.topology->vertexCount()) + " (use replaceMesh)");
+                                                " vertices but the mesh has " + std::to_string(b.vertex_count) +
+                                                " (use replaceMesh)");
   if (!previous.empty() && previous.size() != positions.size())
     throw Error(ErrorCode::InvalidArgument, b.label() + ": the previous-position view has " +
                                                 std::to_string(previous.size()) + " vertices, not " +
@@ -396,6 +433,10 @@ const StepResult& SensorWorld::step() {
   res.stats = StepStats{};
   StepStats& st = res.stats;
 
+  // What inspection rebuilt since the last step goes again (SensorWorld::topology, partition).
+  if (!w.keepsSetup())
+    for (auto& kv : w.bodies)
+      if (kv.second->partitioned) kv.second->dropSetup();
   auto t = Clock::now();
   w.preparePartitions(st);
   st.ms_repartition = msSince(t);
@@ -480,12 +521,12 @@ double SensorWorld::mu(BodyId a, BodyId b) const {
   return impl_->settings.mu_edge_factor * std::max(ba.mean_edge, bb.mean_edge) + ba.margin + bb.margin;
 }
 
-const MeshTopology& SensorWorld::topology(BodyId id) const { return *impl_->get(id).topology; }
+const MeshTopology& SensorWorld::topology(BodyId id) const { return impl_->get(id).fullTopology(); }
 
 const Partition& SensorWorld::partition(BodyId id) const {
-  const Body& b = impl_->get(id);
+  Body& b = impl_->get(id);
   if (!b.partitioned) throw Error(ErrorCode::InvalidArgument, b.label() + " has not been partitioned yet (call step())");
-  return b.partition;
+  return b.fullPartition();
 }
 
 std::vector<ParticleState> SensorWorld::particles() const {
@@ -500,7 +541,7 @@ std::size_t SensorWorld::repartitionCount(BodyId id) const { return impl_->get(i
 
 std::size_t SensorWorld::memoryBytes(BodyId id) const {
   const Body& b = impl_->get(id);
-  return sizeof(Body) + b.topology->bytes() + b.regions.bytes() + b.partition.region_of.capacity() * sizeof(Index) +
+  return sizeof(Body) + (b.topology ? b.topology->bytes() : 0) + b.regions.bytes() + b.partition.region_of.capacity() * sizeof(Index) +
          b.partition.seed_vertex.capacity() * sizeof(Index) +
          b.partition.code_vectors.capacity() * sizeof(b.partition.code_vectors[0]) +
          b.particle_vertex.capacity() * sizeof(Index) + b.chunks.bytes() +

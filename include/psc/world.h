@@ -153,12 +153,18 @@ class SensorWorld {
   double mu(BodyId a, BodyId b) const;
 
   // --- inspection (after the body's first step) ---
+  // After partitioning, the midphase keeps only what a step reads (chunks of triangles, no
+  // one-ring or vertex-triangle lists, no per-vertex region): topology() and partition() rebuild
+  // the full topology and Partition::region_of from it (O(M log M) on the first call after a step)
+  // and keep them until the next step(), replaceMesh() or removeBody(), which the references do
+  // not outlive. Not safe to call from two threads on one world at once, like the rest.
   const MeshTopology& topology(BodyId id) const;
   const Partition& partition(BodyId id) const;   ///< psc::Error before the first step
   std::vector<ParticleState> particles() const;  ///< all particles, by body then region
   std::size_t particleCount(BodyId id) const;
   std::size_t repartitionCount(BodyId id) const;  ///< times re-partitioned after the first
-  /// Bytes the midphase keeps for this body: topology, regions, particles (no positions).
+  /// Bytes the midphase keeps for this body: chunks, boxes, regions, particles, and the full
+  /// topology while it is alive (no positions, no convex parts).
   std::size_t memoryBytes(BodyId id) const;
   const MeshReport& report(BodyId id) const;
   const SensorSettings& settings() const;

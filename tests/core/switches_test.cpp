@@ -1,5 +1,6 @@
 // Settings that switch a stage off change what they should and nothing else (build_candidates,
-// one_ring, no_backtrack), and the midphase's memory stays flat over a long deforming run.
+// one_ring, no_backtrack), the midphase's memory stays flat over a long deforming run, and it
+// keeps at most 32 bytes per vertex without losing a contact.
 #include "psc/mesh.h"
 #include "psc/shapes.h"
 #include "psc/testkit/reference.h"
@@ -330,6 +331,98 @@ TEST(Memory, MidphaseBytesStayFlatOverALongDeformingRun) {
   EXPECT_GE(w.repartitionCount(ids[1]), 4u);
   EXPECT_GT(first_cycle, 0u);
   EXPECT_LE(later, first_cycle);
+}
+
+TEST(Memory, AtMost32BytesPerVertexAndEveryContactFound) {
+  // Two 20k-vertex spheres pressed into each other. After partitioning the midphase keeps only what
+  // a step reads (docs/DECISIONS.md, "Midphase memory"): at most 32 bytes per vertex (measured 29.6
+  // on 8 tori of 50k vertices). The full topology and region_of come back for inspection, equal to
+  // what the mesh gives, and go again at the next step. Every contact within the margins is a
+  // candidate, once.
+  constexpr double kMargin = 0.02;
+  TriMesh a = makeSphere(1.0, 20000), b = makeSphere(1.0, 20000);
+  Vec3 centre_b(2.0, 0.05, 0.02);
+  b.translate(centre_b);
+  SensorWorld w;
+  addAll(w, {&a, &b}, kMargin);
+  const TriMesh* meshes[2] = {&a, &b};
+  std::size_t contacts = 0;
+  for (int step = 0; step < 4; ++step) {
+    for (Vec3& p : b.vertices) p.x() -= 0.005;  // in place: the views stay valid
+    centre_b.x() -= 0.005;
+    const StepResult& r = w.step();
+    for (BodyId id : {BodyId{0}, BodyId{1}}) {
+      const double per_vertex = double(w.memoryBytes(id)) / double(meshes[id]->vertices.size());
+      EXPECT_LE(per_vertex, 32.0) << "body " << id << ", step " << step;
+    }
+    std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
+    for (const CandidatePair& c : r.candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+    EXPECT_EQ(cand.size(), r.candidates.size()) << "a candidate came out twice";
+    // Brute force over the vertices that can reach the other sphere (its triangles lie in its ball).
+    for (BodyId i : {BodyId{0}, BodyId{1}}) {
+      const TriMesh& vm = *meshes[i];
+      const TriMesh& tm = *meshes[1 - i];
+      const Vec3 centre = i == 0 ? centre_b : Vec3(Vec3::Zero());
+      std::vector<Vec3> near;
+      std::vector<Index> index;
+      for (Index v = 0; v < vm.vertices.size(); ++v)
+        if ((vm.vertices[v] - centre).norm() < 1.0 + 2.0 * kMargin) {
+          near.push_back(vm.vertices[v]);
+          index.push_back(v);
+        }
+      testkit::forEachContact(near, tm.vertices, tm.triangles, [&](Index) { return 2.0 * kMargin; },
+                              [&](Index k, Index t, double) {
+                                ++contacts;
+                                EXPECT_EQ(cand.count({i, index[k], BodyId{1 - i}, t}), 1u)
+                                    << "missed: vertex " << index[k] << " of body " << i << ", triangle " << t;
+                              });
+    }
+  }
+  EXPECT_GT(contacts, 100u) << "the spheres must touch";
+
+  // Inspection rebuilds the setup structures from the runtime form: the same triangles in the same
+  // order, the same one rings, every vertex in its chunk's region.
+  const std::size_t before = w.memoryBytes(0);
+  const MeshTopology& topo = w.topology(0);
+  EXPECT_EQ(topo.triangles(), a.triangles);
+  const MeshTopology fresh(a.triangles, a.vertices.size());
+  for (Index v = 0; v < fresh.vertexCount(); ++v) {
+    const IndexRange x = topo.neighbors(v), y = fresh.neighbors(v);
+    ASSERT_TRUE(std::equal(x.begin(), x.end(), y.begin(), y.end())) << "vertex " << v;
+  }
+  const Partition& p = w.partition(0);
+  ASSERT_EQ(p.region_of.size(), a.vertices.size());
+  for (const ParticleState& s : w.particles()) EXPECT_EQ(w.partition(s.body).region_of[s.vertex], s.region);
+  EXPECT_GT(w.memoryBytes(0), before);
+  w.step();
+  EXPECT_EQ(w.memoryBytes(0), before) << "inspection's copies outlived the step";
+}
+
+TEST(Memory, WideIndicesKeepTheMeshAndEveryContact) {
+  // Triangles in a scrambled order and chunks of 400 vertices: the runtime form stores triangle
+  // offsets and corners wider than with the defaults. The mesh comes back unchanged and no contact
+  // is lost.
+  constexpr double kMargin = 0.02;
+  TriMesh a = makeSphere(1.0, 3000), b = makeSphere(1.0, 3000);
+  for (std::size_t t = 0; t < a.triangles.size(); ++t) std::swap(a.triangles[t], a.triangles[(t * 7919) % a.triangles.size()]);
+  b.translate(Vec3(1.98, 0.05, 0.02));
+  SensorSettings settings;
+  settings.chunk_vertices = 400;
+  SensorWorld w(settings);
+  addAll(w, {&a, &b}, kMargin);
+  const StepResult& r = w.step();
+  std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
+  for (const CandidatePair& c : r.candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+  EXPECT_EQ(cand.size(), r.candidates.size());
+  std::size_t contacts = 0;
+  const TriMesh* meshes[2] = {&a, &b};
+  for (BodyId i : {BodyId{0}, BodyId{1}})
+    for (const auto& [v, t] : testkit::bruteContacts(*meshes[i], *meshes[1 - i], 2.0 * kMargin)) {
+      ++contacts;
+      EXPECT_EQ(cand.count({i, v, BodyId{1 - i}, t}), 1u) << "missed: vertex " << v << " of body " << i << ", triangle " << t;
+    }
+  EXPECT_GT(contacts, 10u);
+  EXPECT_EQ(w.topology(0).triangles(), a.triangles);
 }
 
 }  // namespace
