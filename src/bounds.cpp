@@ -321,6 +321,7 @@ struct Scratch {
   std::vector<TriangleRec> tris;
   std::vector<TriangleCorners> corners;
   std::vector<Index> tri_keep;
+  std::vector<Index> hits;
 };
 
 struct PairContext {
@@ -429,17 +430,26 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       ready = true;
     }
     probes += s.tri_keep.size();
+    // Branch-free box and slab tests over the kept triangles (one hit in about ten: a branch per
+    // test mispredicts often enough to dominate the loop), then the exact tests on the hits.
     const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
-    const double n_lo = vr.xn - vr.r, n_hi = vr.xn + vr.r;
+    const double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
+    const double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
+    s.hits.resize(s.tri_keep.size());
+    std::size_t n_hits = 0;
     for (Index k : s.tri_keep) {
       const TriangleRec& tr = s.tris[k];
-      if (sensors && (n_hi < tr.nlo || n_lo > tr.nhi)) continue;
       // The vertex's ball against the triangle's box: tighter than a cube of half-side r at the
-      // box's edges and corners.
-      const double dx = std::max(std::max(tr.lo.x() - x, x - tr.hi.x()), 0.0);
-      const double dy = std::max(std::max(tr.lo.y() - y, y - tr.hi.y()), 0.0);
-      const double dz = std::max(std::max(tr.lo.z() - z, z - tr.hi.z()), 0.0);
-      if (dx * dx + dy * dy + dz * dz > r2) continue;
+      // box's edges and corners; and the two extents along the sensor axis.
+      const double dx = std::max(0.0, std::max(tr.lo.x() - x, x - tr.hi.x()));
+      const double dy = std::max(0.0, std::max(tr.lo.y() - y, y - tr.hi.y()));
+      const double dz = std::max(0.0, std::max(tr.lo.z() - z, z - tr.hi.z()));
+      const bool meets = (dx * dx + dy * dy + dz * dz <= r2) & (n_hi >= tr.nlo) & (n_lo <= tr.nhi);
+      s.hits[n_hits] = k;
+      n_hits += meets;
+    }
+    for (std::size_t h = 0; h < n_hits; ++h) {
+      const Index k = s.hits[h];
       const TriangleCorners& tc = s.corners[k];
       // With the radius bound the exact distance decides: a pair that is not within the vertex's
       // radius now is no candidate (the swept bound keeps what the boxes keep: its pairs may meet
