@@ -6,6 +6,9 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace psc::detail {
 
@@ -314,13 +317,37 @@ struct TriangleCorners {
   Index k;  ///< its place in the chunk lists (ChunkLists::triangle)
 };
 
+/// The triangles of one chunk pair that reach the vertex chunk's box, as a structure of arrays:
+/// the probe loop over them is branch-free and vectorises.
+struct KeptTriangles {
+  std::vector<double> lo_x, lo_y, lo_z, hi_x, hi_y, hi_z, n_lo, n_hi;
+  std::vector<Index> record;  ///< index into Scratch::tris / Scratch::corners
+  std::vector<unsigned char> meets;  ///< per probe: 1 when the vertex's ball meets the triangle's box
+  std::size_t size() const { return record.size(); }
+  void clear() {
+    for (std::vector<double>* v : {&lo_x, &lo_y, &lo_z, &hi_x, &hi_y, &hi_z, &n_lo, &n_hi}) v->clear();
+    record.clear();
+  }
+  void push(const TriangleRec& tr, Index k) {
+    lo_x.push_back(tr.lo.x());
+    lo_y.push_back(tr.lo.y());
+    lo_z.push_back(tr.lo.z());
+    hi_x.push_back(tr.hi.x());
+    hi_y.push_back(tr.hi.y());
+    hi_z.push_back(tr.hi.z());
+    n_lo.push_back(tr.nlo);
+    n_hi.push_back(tr.nhi);
+    record.push_back(k);
+  }
+};
+
 struct Scratch {
   std::vector<SweepItem> items_a, items_b;
   std::vector<ChunkRef> near_a, near_b;
   std::vector<VertexRec> verts;
   std::vector<TriangleRec> tris;
   std::vector<TriangleCorners> corners;
-  std::vector<Index> tri_keep;
+  KeptTriangles kept;
   std::vector<Index> hits;
 };
 
@@ -418,38 +445,70 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     if (!ready) {
       // Only the triangles that reach the vertex chunk's grown box can meet any of its vertices.
       gatherTriangles(ctx, ct);
-      s.tri_keep.clear();
+      KeptTriangles& kept = s.kept;
+      kept.clear();
       const Grown& vbox = cv.box;
       const double g = ctx.margin_sum - ctx.vb.margin;  // the triangle side's share of the radius
       for (std::size_t k = 0; k < nt; ++k) {
         const TriangleRec& tr = s.tris[static_cast<std::size_t>(ct.triangles_at) + k];
         if ((tr.lo.array() - g <= vbox.hi.array()).all() && (vbox.lo.array() <= tr.hi.array() + g).all() &&
             (!sensors || (tr.nhi + g >= cv.lo_n - vbox.g && tr.nlo - g <= cv.hi_n + vbox.g)))
-          s.tri_keep.push_back(static_cast<Index>(static_cast<std::size_t>(ct.triangles_at) + k));
+          kept.push(tr, static_cast<Index>(static_cast<std::size_t>(ct.triangles_at) + k));
       }
+      s.hits.resize(kept.size());
+      kept.meets.resize(kept.size());
       ready = true;
     }
-    probes += s.tri_keep.size();
-    // Branch-free box and slab tests over the kept triangles (one hit in about ten: a branch per
-    // test mispredicts often enough to dominate the loop), then the exact tests on the hits.
+    const KeptTriangles& kept = s.kept;
+    const std::size_t m = kept.size();
+    probes += m;
+    // The vertex's ball against each triangle's box (tighter than a cube of half-side r at the
+    // box's edges and corners) and the two extents along the sensor axis, without a branch per
+    // test (about one triangle in ten passes; branches mispredicted), then the exact tests on the
+    // triangles that pass.
     const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
     const double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
     const double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
-    s.hits.resize(s.tri_keep.size());
+    const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
+    const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
+    const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
+    const Index* record = kept.record.data();
+    Index* hits = s.hits.data();
+    // Pass 1 marks the triangles that pass, pass 2 gathers them: a running count inside the
+    // vector loop would chain every iteration to the one before (measured 20% slower).
+    unsigned char* meets = s.kept.meets.data();
+    std::size_t j = 0;
+#if defined(__SSE2__)
+    // Two triangles per instruction (SSE2 is part of x86-64); the same tests as the loop below.
+    {
+      const __m128d vx = _mm_set1_pd(x), vy = _mm_set1_pd(y), vz = _mm_set1_pd(z), vr2 = _mm_set1_pd(r2);
+      const __m128d vnl = _mm_set1_pd(n_lo), vnh = _mm_set1_pd(n_hi), zero = _mm_setzero_pd();
+      for (; j + 2 <= m; j += 2) {
+        const __m128d dx = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(lx + j), vx), _mm_sub_pd(vx, _mm_loadu_pd(hx + j))));
+        const __m128d dy = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(ly + j), vy), _mm_sub_pd(vy, _mm_loadu_pd(hy + j))));
+        const __m128d dz = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(lz + j), vz), _mm_sub_pd(vz, _mm_loadu_pd(hz + j))));
+        const __m128d d2 = _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy)), _mm_mul_pd(dz, dz));
+        const __m128d ok = _mm_and_pd(_mm_cmple_pd(d2, vr2), _mm_and_pd(_mm_cmpge_pd(vnh, _mm_loadu_pd(tnl + j)),
+                                                                        _mm_cmple_pd(vnl, _mm_loadu_pd(tnh + j))));
+        const int mask = _mm_movemask_pd(ok);
+        meets[j] = static_cast<unsigned char>(mask & 1);
+        meets[j + 1] = static_cast<unsigned char>(mask >> 1);
+      }
+    }
+#endif
+    for (; j < m; ++j) {
+      const double dx = std::max(0.0, std::max(lx[j] - x, x - hx[j]));
+      const double dy = std::max(0.0, std::max(ly[j] - y, y - hy[j]));
+      const double dz = std::max(0.0, std::max(lz[j] - z, z - hz[j]));
+      meets[j] = dx * dx + dy * dy + dz * dz <= r2 && n_hi >= tnl[j] && n_lo <= tnh[j];
+    }
     std::size_t n_hits = 0;
-    for (Index k : s.tri_keep) {
-      const TriangleRec& tr = s.tris[k];
-      // The vertex's ball against the triangle's box: tighter than a cube of half-side r at the
-      // box's edges and corners; and the two extents along the sensor axis.
-      const double dx = std::max(0.0, std::max(tr.lo.x() - x, x - tr.hi.x()));
-      const double dy = std::max(0.0, std::max(tr.lo.y() - y, y - tr.hi.y()));
-      const double dz = std::max(0.0, std::max(tr.lo.z() - z, z - tr.hi.z()));
-      const bool meets = (dx * dx + dy * dy + dz * dz <= r2) & (n_hi >= tr.nlo) & (n_lo <= tr.nhi);
-      s.hits[n_hits] = k;
-      n_hits += meets;
+    for (std::size_t k = 0; k < m; ++k) {
+      hits[n_hits] = record[k];
+      n_hits += meets[k];
     }
     for (std::size_t h = 0; h < n_hits; ++h) {
-      const Index k = s.hits[h];
+      const Index k = hits[h];
       const TriangleCorners& tc = s.corners[k];
       // With the radius bound the exact distance decides: a pair that is not within the vertex's
       // radius now is no candidate (the swept bound keeps what the boxes keep: its pairs may meet
