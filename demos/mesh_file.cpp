@@ -46,7 +46,7 @@ void collect(const aiScene* scene, TriMesh& out, MeshFileInfo& info, const std::
   std::unordered_map<PositionKey, Index, PositionKeyHash> index_of;
   for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
     const aiMesh* mesh = scene->mMeshes[m];
-    if (!mesh || !(mesh->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) continue;
+    if (!mesh || !(mesh->mPrimitiveTypes & (aiPrimitiveType_TRIANGLE | aiPrimitiveType_POLYGON))) continue;
     ++info.meshes;
     info.vertices_in_file += mesh->mNumVertices;
     std::vector<Index> remap(mesh->mNumVertices);
@@ -59,22 +59,25 @@ void collect(const aiScene* scene, TriMesh& out, MeshFileInfo& info, const std::
       if (inserted) out.vertices.emplace_back(p.x, p.y, p.z);
       remap[v] = it->second;
     }
+    // Polygons are cut into a fan from their first corner (assimp's Triangulate step is not used,
+    // see loadMeshFile). A fan is exact for the convex polygons of real meshes (OFF and OBJ
+    // quads); a concave polygon may come out folded but still closed.
     for (unsigned f = 0; f < mesh->mNumFaces; ++f) {
       const aiFace& face = mesh->mFaces[f];
-      if (face.mNumIndices != 3) continue;  // points and lines left by SortByPType
-      Triangle t{};
-      for (int k = 0; k < 3; ++k) {
+      if (face.mNumIndices < 3) continue;  // points, lines, and empty faces of broken files
+      for (unsigned k = 0; k < face.mNumIndices; ++k)
         if (face.mIndices[k] >= mesh->mNumVertices)
           throw fileError(path, "face " + std::to_string(f) + " of mesh " + std::to_string(m) +
                                     " uses vertex " + std::to_string(face.mIndices[k]) + " of " +
                                     std::to_string(mesh->mNumVertices));
-        t[static_cast<std::size_t>(k)] = remap[face.mIndices[k]];
+      for (unsigned k = 1; k + 1 < face.mNumIndices; ++k) {
+        const Triangle t{remap[face.mIndices[0]], remap[face.mIndices[k]], remap[face.mIndices[k + 1]]};
+        if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) {
+          ++info.triangles_dropped;
+          continue;
+        }
+        out.triangles.push_back(t);
       }
-      if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) {
-        ++info.triangles_dropped;
-        continue;
-      }
-      out.triangles.push_back(t);
     }
   }
 }
@@ -147,10 +150,10 @@ TriMesh loadMeshFile(const std::string& path, MeshFileInfo* info_out) {
   checkHeader(path, size);
 
   Assimp::Importer importer;
-  // Lines and points are split off so that only triangles remain in the meshes we read.
-  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
-  const unsigned flags = aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
-                         aiProcess_SortByPType | aiProcess_ValidateDataStructure;
+  // Only post-processing steps that survive malformed input: assimp 5.2's Triangulate aborts on an
+  // ai_assert and SortByPType crashes on faces with no indices (both found by scripts/fuzz on PLY
+  // face lists). collect() cuts polygons into triangles and skips points and lines itself.
+  const unsigned flags = aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices | aiProcess_ValidateDataStructure;
   const aiScene* scene = nullptr;
   try {
     scene = importer.ReadFile(path, flags);
