@@ -6,6 +6,7 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -125,9 +126,12 @@ void checkHeader(const std::string& path, std::uintmax_t size) {
   std::istringstream text(head);
   std::string first;
   std::getline(text, first);
+  // assimp reads a file as PLY by its extension, or by a "ply" at its start whatever follows.
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".ply" || head.compare(0, 3, "ply") == 0) return checkPlyHeader(path, size, text);
   std::istringstream words(first);
   words >> first;
-  if (first == "ply") return checkPlyHeader(path, size, text);
   if (first.size() >= 3 && first.compare(first.size() - 3, 3, "OFF") == 0) {
     std::istringstream rest(head);
     std::string skip, nv, nf;

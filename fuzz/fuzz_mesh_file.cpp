@@ -29,8 +29,12 @@ constexpr const char* kExtensions[] = {"obj", "off", "ply", "stl", "dae", "3ds",
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;
   const char* ext = kExtensions[data[0] % (sizeof kExtensions / sizeof kExtensions[0])];
-  // One file per process: parallel fuzzing jobs do not share it.
-  const std::string path = "/tmp/psc_fuzz_mesh_" + std::to_string(::getpid()) + "." + ext;
+  // One file per process: parallel fuzzing jobs do not share it. The pid is padded to a fixed
+  // width: the loader's work on the path (and so the coverage libFuzzer steers by) must not
+  // depend on the pid, or two runs with the same seed would explore different inputs.
+  char pid[16];
+  std::snprintf(pid, sizeof pid, "%010ld", static_cast<long>(::getpid()));
+  const std::string path = std::string("/tmp/psc_fuzz_mesh_") + pid + "." + ext;
   {
     std::ofstream f(path, std::ios::binary | std::ios::trunc);
     f.write(reinterpret_cast<const char*>(data + 1), static_cast<std::streamsize>(size - 1));
