@@ -506,24 +506,21 @@ TEST(ExactTests, ContinuousTurnsTheDiscreteContactsOfACrossingNodeToItsSide) {
 TEST(ExactTests, SettingsExactIsValidatedAndNamed) {
   psc_test::SoftWorld w(0);
   psc::bullet::Settings s;
+  const auto expectRefused = [&](const std::string& what, const std::string& named) {
+    try {
+      auto plugin = psc::bullet::install(w.world, s);
+      ADD_FAILURE() << "accepted " << what;
+    } catch (const psc::Error& e) {
+      EXPECT_EQ(e.code(), psc::ErrorCode::InvalidSettings);
+      EXPECT_NE(std::string(e.what()).find(named), std::string::npos) << e.what();
+    }
+  };
   s.exact = static_cast<ExactTest>(7);
-  try {
-    auto plugin = psc::bullet::install(w.world, s);
-    FAIL() << "accepted an exact test that does not exist";
-  } catch (const psc::Error& e) {
-    EXPECT_EQ(e.code(), psc::ErrorCode::InvalidSettings);
-    EXPECT_NE(std::string(e.what()).find("Settings::exact"), std::string::npos) << e.what();
-  }
+  expectRefused("an exact test that does not exist", "Settings::exact");
   // Continuous needs the swept bound, which the thesis's flag-only mode does not have.
   s.exact = ExactTest::Continuous;
   s.sensors.flagging = psc::Flagging::Sensors;
-  try {
-    auto plugin = psc::bullet::install(w.world, s);
-    FAIL() << "accepted Continuous with the thesis's flag-only mode";
-  } catch (const psc::Error& e) {
-    EXPECT_EQ(e.code(), psc::ErrorCode::InvalidSettings);
-    EXPECT_NE(std::string(e.what()).find("exact = Continuous"), std::string::npos) << e.what();
-  }
+  expectRefused("Continuous with the thesis's flag-only mode", "exact = Continuous");
   for (ExactTest t : {ExactTest::Bullet, ExactTest::Robust, ExactTest::Continuous})
     EXPECT_EQ(psc::bullet::exactTestFromString(psc::bullet::toString(t)), t);
   EXPECT_THROW(psc::bullet::exactTestFromString("exact"), psc::Error);
