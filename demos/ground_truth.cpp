@@ -1,10 +1,14 @@
 #include "ground_truth.h"
 
+#include "psc/mesh.h"
 #include "psc/testkit/reference.h"
+#include "psc/world.h"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
 namespace psc::demo {
 namespace {
@@ -197,15 +201,32 @@ const TruthResult& GroundTruth::compute(const std::vector<TruthBody>& bodies, co
   return result_;
 }
 
-const TruthResult& GroundTruth::computeSelf(const std::vector<TruthBody>& bodies,
-                                            const std::vector<std::vector<Vec3>>& rest, double rest_exclusion,
+double SelfRule::radius(const TruthBody& body, std::size_t b) const {
+  return selfContactRadius(body.margin, rest_mean_edge.at(b), radius_edges);
+}
+
+SelfRule selfRule(const std::vector<std::vector<Triangle>>& triangles, std::vector<std::vector<Vec3>> rest) {
+  if (triangles.size() != rest.size())
+    throw std::invalid_argument("selfRule: " + std::to_string(triangles.size()) + " meshes but " +
+                                std::to_string(rest.size()) + " rest shapes");
+  SelfRule rule;
+  const SensorSettings defaults;
+  rule.rest_exclusion = defaults.self_rest_exclusion;
+  rule.radius_edges = defaults.self_radius_edges;
+  for (std::size_t b = 0; b < rest.size(); ++b)
+    rule.rest_mean_edge.push_back(edgeStats(MeshTopology(triangles[b], rest[b].size()), PositionView::of(rest[b])).mean);
+  rule.rest = std::move(rest);
+  return rule;
+}
+
+const TruthResult& GroundTruth::computeSelf(const std::vector<TruthBody>& bodies, const SelfRule& rule,
                                             const TruthSettings& s) {
   self_result_.contacts.clear();
   self_result_.distance_tests = 0;
   grid_.build(bodies);
   for (std::size_t a = 0; a < bodies.size(); ++a) {
     const TruthBody& A = bodies[a];
-    const double rs = 2.0 * A.margin;
+    const double rs = rule.radius(A, a);
     for (std::size_t v = 0; v < A.x.size(); ++v) {
       const Vec3& p = A.x[v];
       const double motion = s.full ? 2.0 * (p - A.prev[v]).norm() : 0.0;
@@ -217,7 +238,7 @@ const TruthResult& GroundTruth::computeSelf(const std::vector<TruthBody>& bodies
         if (tri[0] == v || tri[1] == v || tri[2] == v) return;
         const double d2 = testkit::pointTriangleDistanceSquared(p, A.x[tri[0]], A.x[tri[1]], A.x[tri[2]]);
         ++self_result_.distance_tests;
-        if (d2 > reach * reach || testkit::selfPairExcluded(static_cast<Index>(v), tri, rest[a], A.margin, rest_exclusion))
+        if (d2 > reach * reach || testkit::selfPairExcluded(static_cast<Index>(v), tri, rule.rest[a], rs, rule.rest_exclusion))
           return;
         pushIfAny(self_result_.contacts, {static_cast<Index>(a), static_cast<Index>(v), b, t}, std::sqrt(d2), rs, rf, s);
       });
@@ -254,19 +275,19 @@ TruthResult groundTruthBruteForce(const std::vector<TruthBody>& bodies, const Tr
   return r;
 }
 
-TruthResult groundTruthSelfBruteForce(const std::vector<TruthBody>& bodies, const std::vector<std::vector<Vec3>>& rest,
-                                      double rest_exclusion, const TruthSettings& s) {
+TruthResult groundTruthSelfBruteForce(const std::vector<TruthBody>& bodies, const SelfRule& rule,
+                                      const TruthSettings& s) {
   TruthResult r;
   for (std::size_t a = 0; a < bodies.size(); ++a) {
     const TruthBody& A = bodies[a];
-    const double rs = 2.0 * A.margin;
+    const double rs = rule.radius(A, a);
     const auto motion = [&](Index v) { return s.full ? 2.0 * (A.x[v] - A.prev[v]).norm() : 0.0; };
     const auto radius = [&](Index v) {
       const double rmax = s.full ? rs + motion(v) : rs;
       return std::nextafter(rmax + band(rmax, s), std::numeric_limits<double>::infinity());
     };
     const auto excluded = [&](Index v, Index t) {
-      return testkit::selfPairExcluded(v, A.triangles[t], rest[a], A.margin, rest_exclusion);
+      return testkit::selfPairExcluded(v, A.triangles[t], rule.rest[a], rs, rule.rest_exclusion);
     };
     testkit::forEachContact(A.x, A.x, A.triangles, radius, excluded, [&](Index v, Index t, double d) {
       pushIfAny(r.contacts, {static_cast<Index>(a), v, static_cast<Index>(a), t}, d, rs, rs + motion(v), s);

@@ -10,9 +10,11 @@
 // either way on rounding alone, so it is classed Ambiguous: neither required for recall nor counted
 // as "outside the truth".
 //
-// Self-collision (computeSelf): vertex v and triangle t of the same body at the same radii with
-// margin_B = margin_A, leaving out the pairs the exclusion rule names (testkit::selfPairExcluded:
-// t holds v, or the two were within rest_exclusion × 2 × margin in the body's rest shape).
+// Self-collision (computeSelf): vertex v and triangle t of the same body, with the body's self
+// contact radius R (psc::selfContactRadius: max(2·margin, radius_edges × mean rest edge)) in
+// place of margin_A + margin_B, leaving out the pairs the exclusion rule names
+// (testkit::selfPairExcluded: t holds v, or the two were within rest_exclusion × R in the body's
+// rest shape).
 #pragma once
 
 #include "psc/testkit/box_grid.h"
@@ -25,6 +27,21 @@ namespace psc::demo {
 
 /// One body as the truth sees it. Positions at the moment contacts are decided (in Bullet: m_x
 /// after predictMotion) and one step earlier (m_q).
+struct TruthBody;
+
+/// The self-collision rule of every body (psc::SensorWorld::setSelfCollision, restated).
+struct SelfRule {
+  std::vector<std::vector<Vec3>> rest;  ///< each body's rest shape (its vertex count)
+  std::vector<double> rest_mean_edge;   ///< mean edge length of each rest shape
+  double rest_exclusion = 2.0;          ///< psc::SensorSettings::self_rest_exclusion
+  double radius_edges = 1.0;            ///< psc::SensorSettings::self_radius_edges
+  /// Body b's self contact radius (margin from `body`, as the plugin reads it each step).
+  double radius(const TruthBody& body, std::size_t b) const;
+};
+
+/// The rule for bodies with these triangles and rest shapes, with the core's default factors.
+SelfRule selfRule(const std::vector<std::vector<Triangle>>& triangles, std::vector<std::vector<Vec3>> rest);
+
 struct TruthBody {
   std::vector<Vec3> x;
   std::vector<Vec3> prev;           ///< same size as x; may equal x (no motion term)
@@ -115,11 +132,10 @@ class GroundTruth {
  public:
   const TruthResult& compute(const std::vector<TruthBody>& bodies, const TruthSettings& settings);
   /// Every body's contacts with itself (keys with vertex_body == triangle_body): strict radius
-  /// 2·margin, full 2·margin + 2·|x_v − x_v,prev|, without the pairs testkit::selfPairExcluded
-  /// names for rest[b] (body b's rest shape, its vertex count) and rest_exclusion. Its own result:
-  /// compute()'s stays valid.
-  const TruthResult& computeSelf(const std::vector<TruthBody>& bodies, const std::vector<std::vector<Vec3>>& rest,
-                                 double rest_exclusion, const TruthSettings& settings);
+  /// R = rule.radius(b), full R + 2·|x_v − x_v,prev|, without the pairs testkit::selfPairExcluded
+  /// names for the rule. Its own result: compute()'s stays valid.
+  const TruthResult& computeSelf(const std::vector<TruthBody>& bodies, const SelfRule& rule,
+                                 const TruthSettings& settings);
   const TriangleGrid& grid() const { return grid_; }
 
  private:
@@ -131,8 +147,8 @@ class GroundTruth {
 TruthResult groundTruthBruteForce(const std::vector<TruthBody>& bodies, const TruthSettings& settings);
 
 /// The reference for computeSelf: every vertex against every triangle of its own body.
-TruthResult groundTruthSelfBruteForce(const std::vector<TruthBody>& bodies, const std::vector<std::vector<Vec3>>& rest,
-                                      double rest_exclusion, const TruthSettings& settings);
+TruthResult groundTruthSelfBruteForce(const std::vector<TruthBody>& bodies, const SelfRule& rule,
+                                      const TruthSettings& settings);
 
 /// Vertices inside another closed body deeper than the strict radius (margin_A + margin_B): the
 /// user-visible failure. Inside = odd crossings along +x and along +y (two rays, so that a ray

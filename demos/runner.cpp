@@ -293,8 +293,7 @@ class Run {
   std::vector<ContactKey> found_, found_self_;
   /// The self truth's rest shapes: the scene's initial mesh of each body, which is what the plugin
   /// takes at its first step (its m_x then: the initial positions moved by one step, all nodes alike).
-  std::vector<std::vector<Vec3>> rest_;
-  double rest_exclusion_ = psc::SensorSettings{}.self_rest_exclusion;
+  SelfRule self_rule_;  ///< with --self-collision: the scene's initial meshes as rest shapes
   std::set<PairKey> truth_pairs_, found_pairs_;
   std::vector<CrossingMesh> crossing_meshes_;  ///< body i = scene.bodies[i]'s triangles
   CrossingCounter crossings_;
@@ -341,8 +340,12 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
     for (const Vec3& v : b.mesh.vertices) far_out_ = std::max(far_out_, v.cwiseAbs().maxCoeff());
   far_out_ *= 1000.0;
   for (const SoftBodySpec& b : scene.bodies) crossing_meshes_.push_back(crossingMesh(b.mesh.triangles));
-  if (opt.self_collision)
-    for (const SoftBodySpec& b : scene.bodies) rest_.push_back(b.mesh.vertices);
+  if (opt.self_collision) {
+    std::vector<std::vector<Triangle>> triangles;
+    std::vector<std::vector<Vec3>> rest;
+    for (const SoftBodySpec& b : scene.bodies) triangles.push_back(b.mesh.triangles), rest.push_back(b.mesh.vertices);
+    self_rule_ = selfRule(triangles, std::move(rest));
+  }
   if (!opt.frames_dir.empty()) {
     frames_ = std::make_unique<FrameSeries>(
         opt.frames_dir, opt.frames_name.empty() ? scene.name + "_" + toString(pipeline) : opt.frames_name);
@@ -394,7 +397,7 @@ bool Run::untestable(const ContactKey& k) const {
 void Run::compareWithSelfTruth(StepRecord& rec) {
   // bodies_ and the band are this step's, from compareWithTruth.
   const auto t0 = Clock::now();
-  const TruthResult& tr = truth_.computeSelf(bodies_, rest_, rest_exclusion_, truth_settings_);
+  const TruthResult& tr = truth_.computeSelf(bodies_, self_rule_, truth_settings_);
   rec.ms.truth += msSince(t0);
   StepCounts& n = rec.n;
   for (const ContactKey& k : found_self_) {

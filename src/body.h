@@ -180,6 +180,7 @@ struct Body {
   std::shared_ptr<const ConvexParts> parts;
   /// Self-collision: on when `rest` holds the rest shape (SensorWorld::setSelfCollision).
   std::vector<Vec3> rest;
+  double rest_mean_edge = 0.0;  ///< mean edge length of `rest` (the self contact radius's base)
   bool selfCollides() const { return !rest.empty(); }
   MeshReport report;
   std::size_t vertices_in_triangles = 0;

@@ -360,7 +360,8 @@ struct Scratch {
 struct PairContext {
   const Body& vb;
   const Body& tb;
-  double margin_sum;
+  double margin_sum;      ///< the contact radius without motion: margin_A + margin_B, or the self radius
+  double triangle_share;  ///< the triangle side's part of margin_sum (its boxes' growth)
   double motion_factor;
   bool swept;
   const Axis& axis;
@@ -454,7 +455,7 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       KeptTriangles& kept = s.kept;
       kept.clear();
       const Grown& vbox = cv.box;
-      const double g = ctx.margin_sum - ctx.vb.margin;  // the triangle side's share of the radius
+      const double g = ctx.triangle_share;
       for (std::size_t k = 0; k < nt; ++k) {
         const TriangleRec& tr = s.tris[static_cast<std::size_t>(ct.triangles_at) + k];
         if ((tr.lo.array() - g <= vbox.hi.array()).all() && (vbox.lo.array() <= tr.hi.array() + g).all() &&
@@ -579,13 +580,16 @@ class Collector {
   /// No sensor decision: the particles sense other bodies only.
   void selfBody(const Body& X) {
     const double mf = params_.motion_factor;
+    // The self radius R stands for margin_A + margin_B: each side's boxes grow by R / 2.
+    const double radius = selfContactRadius(X.margin, X.rest_mean_edge, params_.self_radius_edges);
+    const double half = 0.5 * radius;
     std::vector<Grown>& boxes = self_boxes_;
     boxes.resize(X.regionCount());
     s_.items_a.clear();
     const int ax = longestAxis(X.body_box.lo, X.body_box.hi);
     region_pairs_.clear();
     for (Index r = 0; r < X.regionCount(); ++r) {
-      boxes[r] = grown(X.region_box[r], X.margin, mf);
+      boxes[r] = grown(X.region_box[r], half, mf);
       s_.items_a.push_back({boxes[r].lo[ax], boxes[r].hi[ax], r});
       region_pairs_.emplace_back(r, r);
     }
@@ -593,18 +597,18 @@ class Collector {
       if (overlap(boxes[a], boxes[b])) region_pairs_.emplace_back(std::min(a, b), std::max(a, b));
     });
     std::sort(region_pairs_.begin(), region_pairs_.end());
-    const double exclude = params_.self_rest_exclusion * 2.0 * X.margin;
+    const double exclude = params_.self_rest_exclusion * radius;
     Group g{X.id, X.id, {}};
     const Axis no_axis;
-    const PairContext ctx{X, X, 2.0 * X.margin, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude};
+    const PairContext ctx{X, X, radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude};
     const auto t0 = std::chrono::steady_clock::now();
     for (const auto& [ri, rj] : region_pairs_) {
       ++counters_.self_region_pairs;
-      nearChunks(X, ri, boxes[rj], no_axis, s_.near_a);
+      nearChunks(X, ri, half, boxes[rj], no_axis, s_.near_a);
       if (s_.near_a.empty()) continue;
       const bool same = ri == rj;
       if (!same) {
-        nearChunks(X, rj, boxes[ri], no_axis, s_.near_b);
+        nearChunks(X, rj, half, boxes[ri], no_axis, s_.near_b);
         if (s_.near_b.empty()) continue;
       }
       std::vector<ChunkRef>& other = same ? s_.near_a : s_.near_b;
@@ -664,9 +668,9 @@ class Collector {
       }
     }
     // Only the chunks of I that reach J's box and of J that reach I's box can pair up.
-    nearChunks(A, ri, boxJ, axis, s_.near_a);
+    nearChunks(A, ri, A.margin, boxJ, axis, s_.near_a);
     if (s_.near_a.empty()) return;
-    nearChunks(B, rj, boxI, axis, s_.near_b);
+    nearChunks(B, rj, B.margin, boxI, axis, s_.near_b);
     if (s_.near_b.empty()) return;
     if (axis.valid && !sensorSlab()) {
       ++counters_.region_pairs_separated;
@@ -681,8 +685,8 @@ class Collector {
     flagged_.push_back(f);
 
     const auto t0 = std::chrono::steady_clock::now();
-    const PairContext to_b{A, B, A.margin + B.margin, mf, params_.swept, axis, ab_keys, counters_, s_};
-    const PairContext to_a{B, A, A.margin + B.margin, mf, params_.swept, axis, ba_keys, counters_, s_};
+    const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab_keys, counters_, s_};
+    const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba_keys, counters_, s_};
     const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
     s_.items_a.clear();
     s_.items_b.clear();
@@ -712,10 +716,12 @@ class Collector {
   }
 
   /// The chunks of region r of X whose grown boxes reach `other`, with their extents along `axis`.
-  void nearChunks(const Body& X, Index r, const Grown& other, const Axis& axis, std::vector<ChunkRef>& out) {
+  /// Region r's chunks of X whose boxes, grown by `margin` and the motion term, meet `other`.
+  void nearChunks(const Body& X, Index r, double margin, const Grown& other, const Axis& axis,
+                  std::vector<ChunkRef>& out) {
     out.clear();
     for (Index c = X.chunks.region_begin[r]; c < X.chunks.region_begin[r + 1]; ++c) {
-      const Grown g = grown(X.chunk_box[c], X.margin, params_.motion_factor);
+      const Grown g = grown(X.chunk_box[c], margin, params_.motion_factor);
       if (!overlap(g, other)) continue;
       ChunkRef ref{c, 0.0, 0.0, g};
       if (axis.valid) axis.extent(X.chunk_box[c], ref.lo_n, ref.hi_n);

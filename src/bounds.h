@@ -30,6 +30,7 @@ struct CullParams {
   bool swept = false;          ///< MotionBound::Swept
   bool use_sensors = true;     ///< false: Flagging::Bounds (the ablation)
   double self_rest_exclusion = 2.0;  ///< SensorSettings::self_rest_exclusion
+  double self_radius_edges = 1.0;    ///< SensorSettings::self_radius_edges
 };
 
 /// The pairs (i < j) of `bodies` whose grown body boxes overlap, by sort-and-sweep, sorted.

@@ -28,6 +28,8 @@ void validate(const SensorSettings& s) {
   if (s.motion_bound == MotionBound::Swept && s.flagging == Flagging::Sensors)
     throw Error(ErrorCode::InvalidSettings,
                 "motion_bound = Swept is not supported with flagging = Sensors (the thesis's flag-only mode)");
+  if (!std::isfinite(s.self_radius_edges) || s.self_radius_edges < 0.0)
+    bad("self_radius_edges", s.self_radius_edges, "must be finite and not negative");
   if (!std::isfinite(s.self_rest_exclusion) || s.self_rest_exclusion < 1.0)
     bad("self_rest_exclusion", s.self_rest_exclusion, "must be finite and at least 1");
   if (s.min_region_vertices < 1)

@@ -340,7 +340,10 @@ std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
   b->particle_override = desc.particles;
   b->deformable = desc.deformable;
   b->parts = desc.parts;
-  if (desc.self_collision) b->rest = restShape(desc.positions);
+  if (desc.self_collision) {
+    b->rest = restShape(desc.positions);
+    b->rest_mean_edge = edgeStats(*b->topology, desc.positions).mean;
+  }
   return b;
 }
 
@@ -402,9 +405,19 @@ void SensorWorld::setSelfCollision(BodyId id, bool on) {
   if (on) checkSelfCollisionMode(impl_->settings, b.label());
   if (on) checkFinite(b.positions, b.label());
   b.rest = on ? restShape(b.positions) : std::vector<Vec3>{};
+  b.rest_mean_edge = on ? edgeStats(b.fullTopology(), b.positions).mean : 0.0;
 }
 
 bool SensorWorld::selfCollision(BodyId id) const { return impl_->get(id).selfCollides(); }
+
+double SensorWorld::selfRadius(BodyId id) const {
+  const Body& b = impl_->get(id);
+  return b.selfCollides() ? selfContactRadius(b.margin, b.rest_mean_edge, impl_->settings.self_radius_edges) : 0.0;
+}
+
+double selfContactRadius(double margin, double rest_mean_edge, double self_radius_edges) {
+  return std::max(2.0 * margin, self_radius_edges * rest_mean_edge);
+}
 
 void SensorWorld::replaceMesh(BodyId id, std::vector<Triangle> triangles, const PositionView& positions,
                               const PositionView& previous) {
@@ -450,6 +463,7 @@ const StepResult& SensorWorld::step() {
   params.motion_factor = params.swept ? 0.0 : w.settings.motion_factor;
   params.use_sensors = w.settings.flagging == Flagging::SensorsAndBounds;
   params.self_rest_exclusion = w.settings.self_rest_exclusion;
+  params.self_radius_edges = w.settings.self_radius_edges;
   // [beyond] In the default mode a particle only serves the sensor decision of its region's pairs,
   // which exist only where the region's box reaches another body's: the other particles stay put
   // (and still pull).

@@ -52,9 +52,10 @@ double pointTriangleDistance(const Vec3& p, const Vec3& a, const Vec3& b, const 
   return (p - closestPointOnTriangle(p, a, b, c)).norm();
 }
 
-bool selfPairExcluded(Index v, const Triangle& t, const std::vector<Vec3>& rest, double margin, double rest_exclusion) {
+bool selfPairExcluded(Index v, const Triangle& t, const std::vector<Vec3>& rest, double self_radius,
+                      double rest_exclusion) {
   if (t[0] == v || t[1] == v || t[2] == v) return true;
-  return pointTriangleDistance(rest[v], rest[t[0]], rest[t[1]], rest[t[2]]) < rest_exclusion * 2.0 * margin;
+  return pointTriangleDistance(rest[v], rest[t[0]], rest[t[1]], rest[t[2]]) < rest_exclusion * self_radius;
 }
 
 namespace {

@@ -128,15 +128,15 @@ std::vector<Box> randomBoxes(std::uint64_t seed, std::size_t n) {
 TEST(SelfExclusion, IncidentOrCloseAtRestOnly) {
   // Triangle 0 in the plane z = 0; vertex 3 above it at height h in the rest shape.
   const Triangle t{0, 1, 2};
-  const double margin = 0.1, exclusion = 2.0;  // excluded below 2 × (2 × 0.1) = 0.4 at rest
+  const double radius = 0.2, exclusion = 2.0;  // excluded below 2 × 0.2 = 0.4 at rest
   const auto rest = [](double h) { return std::vector<Vec3>{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0.2, 0.2, h}}; };
-  for (Index v = 0; v < 3; ++v) EXPECT_TRUE(selfPairExcluded(v, t, rest(5.0), margin, exclusion)) << "incident " << v;
-  EXPECT_TRUE(selfPairExcluded(3, t, rest(0.39), margin, exclusion));
-  EXPECT_FALSE(selfPairExcluded(3, t, rest(0.41), margin, exclusion));
-  EXPECT_FALSE(selfPairExcluded(3, t, rest(0.4), margin, exclusion)) << "closer than: the bound itself is not";
-  EXPECT_TRUE(selfPairExcluded(3, t, rest(0.41), margin, 2.1)) << "the factor scales the bound";
+  for (Index v = 0; v < 3; ++v) EXPECT_TRUE(selfPairExcluded(v, t, rest(5.0), radius, exclusion)) << "incident " << v;
+  EXPECT_TRUE(selfPairExcluded(3, t, rest(0.39), radius, exclusion));
+  EXPECT_FALSE(selfPairExcluded(3, t, rest(0.41), radius, exclusion));
+  EXPECT_FALSE(selfPairExcluded(3, t, rest(0.4), radius, exclusion)) << "closer than: the bound itself is not";
+  EXPECT_TRUE(selfPairExcluded(3, t, rest(0.41), radius, 2.1)) << "the factor scales the bound";
   // Only the rest shape counts: where the vertex is now does not enter.
-  EXPECT_FALSE(selfPairExcluded(3, t, rest(-3.0), margin, exclusion));
+  EXPECT_FALSE(selfPairExcluded(3, t, rest(-3.0), radius, exclusion));
 }
 
 TEST(Grid, EqualsTestingEveryBoxOnRandomBoxes) {

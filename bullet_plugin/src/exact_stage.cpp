@@ -60,7 +60,7 @@ inline void bulletProjectOrigin(const btVector3& a, const btVector3& b, const bt
 /// What every exact test needs of one pair, as CollideVF_SS sets it up.
 struct PairContext {
   const btSoftBody* psb[2];  // node's body, face's body
-  btScalar mrg;              // sum of the collision margins
+  btScalar mrg;              // contact radius without motion: the margins' sum, or the self contact radius
 };
 
 /// The fields CollideVF_SS fills after its distance test, for weights w and normal `normal`.
@@ -199,9 +199,12 @@ ContactKind continuousTest(const PairContext& ctx, const btSoftBody::Node& node,
   return ContactKind::Crossing;
 }
 
+btScalar marginSum(const btSoftBody& node_body, const btSoftBody& face_body) {
+  return node_body.getCollisionShape()->getMargin() + face_body.getCollisionShape()->getMargin();
+}
+
 PairContext contextOf(const btSoftBody& node_body, const btSoftBody& face_body) {
-  return {{&node_body, &face_body},
-          node_body.getCollisionShape()->getMargin() + face_body.getCollisionShape()->getMargin()};
+  return {{&node_body, &face_body}, marginSum(node_body, face_body)};
 }
 
 }  // namespace
@@ -235,13 +238,18 @@ ContactKind exactContact(ExactTest test, const btSoftBody& node_body, const btSo
 
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body,
                               const psc::CandidatePair* first, const psc::CandidatePair* last) {
+  return collideCandidates(test, node_body, face_body, marginSum(node_body, face_body), first, last);
+}
+
+ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body, btScalar radius,
+                              const psc::CandidatePair* first, const psc::CandidatePair* last) {
   ExactCounts counts;
   if (first == last) return counts;
   const int before = node_body.m_scontacts.size();
   counts.tests = static_cast<std::size_t>(last - first);
   if (test == ExactTest::Bullet) {
     btSoftColliders::CollideVF_SS collide;
-    collide.mrg = node_body.getCollisionShape()->getMargin() + face_body.getCollisionShape()->getMargin();
+    collide.mrg = radius;
     collide.psb[0] = &node_body;
     collide.psb[1] = &face_body;
     // CollideVF_SS::Process only reads the leaves' data pointers, so two stub leaves stand in for
@@ -258,7 +266,7 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
     counts.contacts = static_cast<std::size_t>(node_body.m_scontacts.size() - before);
     return counts;
   }
-  const PairContext ctx = contextOf(node_body, face_body);
+  const PairContext ctx{{&node_body, &face_body}, radius};
   btSoftBody::SContact contact;
   std::vector<const btSoftBody::Node*> crossed;  // nodes with a crossing contact in this call
   std::vector<char> is_crossing;                 // per contact pushed in this call

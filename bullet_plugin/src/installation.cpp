@@ -249,7 +249,8 @@ void Installation::collideSelfPairs() {
     const auto range = candidatesOf(candidates, id, id);
     if (body == nullptr || range.first == range.second) continue;
     const auto start = std::chrono::steady_clock::now();
-    const ExactCounts counts = collideCandidates(settings_.exact, *body, *body, range.first, range.second);
+    const auto radius = static_cast<btScalar>(sensors_.selfRadius(id));
+    const ExactCounts counts = collideCandidates(settings_.exact, *body, *body, radius, range.first, range.second);
     addCounts(counts);
     stats_.self_exact_tests += counts.tests;
     stats_.self_contacts += counts.contacts;

@@ -80,8 +80,18 @@ struct SensorSettings {
   /// Bullet's CollideVF_SS uses 2. Only used when a body has a previous-position view. ≥ 0.
   double motion_factor = 2.0;
   MotionBound motion_bound = MotionBound::Radius;
-  /// Self-collision: a vertex and a triangle of one body closer than this × (2 × margin) in the
-  /// body's rest shape are never self candidates (SensorWorld::setSelfCollision). ≥ 1.
+  /// [beyond] Self-collision: a body's self contact radius is the larger of 2 × margin (what two
+  /// bodies with its margin would use) and this × the mean edge length of its rest shape
+  /// (psc::selfContactRadius). A vertex-face test stops two sheets of one body from passing
+  /// through each other only when its radius spans about an edge: otherwise their edges cross
+  /// between the vertices. tube_coil (margin 0.05) at 996 vertices (mean edge 0.143) had 30
+  /// crossing edge-triangle pairs at 2 × margin, none at 1 × or 1.25 × the mean edge; at 2,000
+  /// vertices (mean edge ~0.1) 11 at 1 ×, none at 1.25 ×. ≥ 0; 0 = 2 × margin. The exclusion at
+  /// rest (below) grows with it: parts closer at rest than self_rest_exclusion × this radius
+  /// never collide, so a mesh too coarse for its folds (tube_coil at 300 vertices) passes through.
+  double self_radius_edges = 1.25;
+  /// Self-collision: a vertex and a triangle of one body closer than this × the self contact
+  /// radius in the body's rest shape are never self candidates (SensorWorld::setSelfCollision). ≥ 1.
   double self_rest_exclusion = 2.0;
   /// [beyond] A body gets at most (vertices in triangles / min_region_vertices) particles from the
   /// budget (at least 1; an explicit BodyDesc::particles is not capped). The thesis's budget counts

@@ -132,13 +132,17 @@ class SensorWorld {
   /// New views after the owner moved its memory (same vertex count; else psc::Error).
   void setPositions(BodyId id, const PositionView& positions, const PositionView& previous = {});
   void setMargin(BodyId id, double margin);
-  /// Self-collision of one body: its vertices against its own triangles. A pair is never a
-  /// candidate when the triangle holds the vertex, or when the two were closer than
-  /// self_rest_exclusion × (2 × margin) in the body's rest shape, i.e. its positions when
-  /// self-collision was switched on (or the body added with it): what touches at rest is the
-  /// surface itself, not a fold. Switching it on again takes the current positions as rest shape.
+  /// Self-collision of one body: its vertices against its own triangles, within the self contact
+  /// radius (selfRadius) plus the motion term. A pair is never a candidate when the triangle holds
+  /// the vertex, or when the two were closer than self_rest_exclusion × the self contact radius
+  /// in the body's rest shape, i.e. its positions when self-collision was switched on (or the
+  /// body added with it): what touches at rest is the surface itself, not a fold. Switching it on
+  /// again takes the current positions as rest shape.
   void setSelfCollision(BodyId id, bool on);
   bool selfCollision(BodyId id) const;
+  /// The body's self contact radius (selfContactRadius of its margin and rest shape); 0 when its
+  /// self-collision is off. Self contacts should be made at this distance, not 2 × margin.
+  double selfRadius(BodyId id) const;
   /// The mesh itself changed (vertex count, triangles): rebuilds the topology and repartitions.
   void replaceMesh(BodyId id, std::vector<Triangle> triangles, const PositionView& positions,
                    const PositionView& previous = {});
@@ -173,5 +177,10 @@ class SensorWorld {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// A body's self contact radius: max(2 × margin, self_radius_edges × rest_mean_edge), where
+/// rest_mean_edge is the mean edge length of its rest shape (edgeStats(...).mean). One definition
+/// for the core, the Bullet plugin's self contacts and the demo's self truth.
+double selfContactRadius(double margin, double rest_mean_edge, double self_radius_edges);
 
 }  // namespace psc

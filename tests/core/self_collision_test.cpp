@@ -1,7 +1,8 @@
 // Self-collision in the core (SensorWorld::setSelfCollision): a body's own (vertex, triangle)
-// pairs within the contact radius 2 × margin come out, except those the exclusion rule names
-// (the triangle holds the vertex, or the two were within self_rest_exclusion × 2 × margin in the
-// rest shape). Checked against brute force over every pair of the body.
+// pairs within its self contact radius R = max(2 × margin, self_radius_edges × mean rest edge)
+// come out, except those the exclusion rule names (the triangle holds the vertex, or the two were
+// within self_rest_exclusion × R in the rest shape). Checked against brute force over every pair
+// of the body, and R against its closed form on a grid cloth.
 #include "psc/error.h"
 #include "psc/shapes.h"
 #include "psc/world.h"
@@ -43,18 +44,18 @@ struct Reference {
   std::set<std::pair<Index, Index>> pairs;
 };
 
-Reference bruteForce(const TriMesh& mesh, const std::vector<Vec3>& rest, double margin, double exclusion) {
+Reference bruteForce(const TriMesh& mesh, const std::vector<Vec3>& rest, double radius, double exclusion) {
   Reference r;
   for (Index v = 0; v < mesh.vertices.size(); ++v)
     for (Index t = 0; t < mesh.triangles.size(); ++t) {
       const Triangle& tri = mesh.triangles[t];
       const Vec3& x = mesh.vertices[v];
       if (!(testkit::pointTriangleDistance(x, mesh.vertices[tri[0]], mesh.vertices[tri[1]], mesh.vertices[tri[2]]) <
-            2.0 * margin))
+            radius))
         continue;
       const bool incident = tri[0] == v || tri[1] == v || tri[2] == v;
       if (incident || testkit::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) <
-                          exclusion * 2.0 * margin) {
+                          exclusion * radius) {
         ++r.excluded;
         continue;
       }
@@ -62,6 +63,14 @@ Reference bruteForce(const TriMesh& mesh, const std::vector<Vec3>& rest, double 
       r.pairs.insert({v, t});
     }
   return r;
+}
+
+/// The mean edge of makePatch(w, h, nx, ny) in closed form: (nx−1)·ny edges of w/(nx−1) along x,
+/// nx·(ny−1) of h/(ny−1) along y and (nx−1)·(ny−1) diagonals.
+double patchMeanEdge(double w, double h, double nx, double ny) {
+  const double dx = w / (nx - 1), dy = h / (ny - 1);
+  const double ex = (nx - 1) * ny, ey = nx * (ny - 1), ed = (nx - 1) * (ny - 1);
+  return (ex * dx + ey * dy + ed * std::hypot(dx, dy)) / (ex + ey + ed);
 }
 
 std::set<std::pair<Index, Index>> selfCandidates(const StepResult& res, BodyId id, std::size_t& duplicates) {
@@ -93,12 +102,15 @@ TEST(SelfCollision, FlatClothHasNoSelfCandidatesFoldedClothHasEveryPairOfItsLaye
   EXPECT_EQ(flat.stats.self_candidate_pairs, 0u);
   EXPECT_GT(flat.stats.self_excluded_pairs, 0u) << "the flat cloth's neighbours are within reach";
 
-  // Folded in two, the layers 0.03 apart (inside 2 × margin = 0.04): every pair the brute force
-  // finds between the layers is a candidate, exactly once, and nothing excluded comes out.
+  // Folded in two, the layers 0.03 apart (inside R = 1.25 × the mean edge 0.0567 > 2 × margin):
+  // every pair the brute force finds between the layers is a candidate, exactly once, and nothing
+  // excluded comes out.
+  const double radius = w.settings().self_radius_edges * patchMeanEdge(2.0, 1.0, 41, 21);
+  EXPECT_NEAR(w.selfRadius(id), radius, 1e-12);
   cloth.vertices = folded(rest, 0.0, 0.015);
   w.setPositions(id, PositionView::of(cloth.vertices));
   const StepResult& fold = w.step();
-  const Reference ref = bruteForce(cloth, rest, margin, w.settings().self_rest_exclusion);
+  const Reference ref = bruteForce(cloth, rest, radius, w.settings().self_rest_exclusion);
   const std::set<std::pair<Index, Index>> got = selfCandidates(fold, id, dup);
   EXPECT_EQ(dup, 0u);
   EXPECT_GT(ref.within, 500u) << "the layers must touch";
@@ -109,7 +121,7 @@ TEST(SelfCollision, FlatClothHasNoSelfCandidatesFoldedClothHasEveryPairOfItsLaye
     const Triangle& tri = cloth.triangles[t];
     ASSERT_FALSE(tri[0] == v || tri[1] == v || tri[2] == v) << "vertex " << v << " in its own triangle " << t;
     ASSERT_GE(testkit::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]),
-              w.settings().self_rest_exclusion * 2.0 * margin * (1.0 - 1e-9))
+              w.settings().self_rest_exclusion * radius * (1.0 - 1e-9))
         << "excluded pair " << v << ", " << t;
   }
   EXPECT_EQ(fold.stats.self_candidate_pairs, got.size());
@@ -118,6 +130,36 @@ TEST(SelfCollision, FlatClothHasNoSelfCandidatesFoldedClothHasEveryPairOfItsLaye
   w.setSelfCollision(id, false);
   EXPECT_FALSE(w.selfCollision(id));
   EXPECT_TRUE(selfCandidates(w.step(), id, dup).empty());
+}
+
+TEST(SelfCollision, TheSelfRadiusIsTwiceTheMarginOrAMultipleOfTheMeanRestEdgeWhicheverIsLarger) {
+  TriMesh cloth = makePatch(2.0, 1.0, 41, 21);
+  const double base = SensorSettings{}.self_radius_edges * patchMeanEdge(2.0, 1.0, 41, 21);  // 1.25 × 0.0567
+  BodyDesc d;
+  d.triangles = cloth.triangles;
+  d.positions = PositionView::of(cloth.vertices);
+  d.margin = 0.02;
+  SensorWorld w;
+  const BodyId id = w.addBody(d);
+  EXPECT_EQ(w.selfRadius(id), 0.0) << "self-collision off";
+  w.setSelfCollision(id, true);
+  EXPECT_NEAR(w.selfRadius(id), base, 1e-12);
+  w.setMargin(id, 0.05);
+  EXPECT_EQ(w.selfRadius(id), 0.1) << "2 × margin is larger";
+  // The base is the rest shape: stretching the cloth now does not change it...
+  for (Vec3& p : cloth.vertices) p *= 3.0;
+  w.setMargin(id, 0.02);
+  EXPECT_NEAR(w.selfRadius(id), base, 1e-12);
+  // ...until self-collision is switched on again, which takes the current shape as rest.
+  w.setSelfCollision(id, true);
+  EXPECT_NEAR(w.selfRadius(id), 3.0 * base, 1e-12);
+  EXPECT_EQ(selfContactRadius(0.02, 0.0567, 0.0), 0.04) << "self_radius_edges = 0: twice the margin";
+
+  SensorSettings plain;
+  plain.self_radius_edges = 0.0;
+  SensorWorld w0(plain);
+  d.self_collision = true;
+  EXPECT_EQ(w0.selfRadius(w0.addBody(d)), 0.04);
 }
 
 TEST(SelfCollision, ARoundBallCannotTouchItself) {
@@ -189,6 +231,16 @@ TEST(SelfCollision, NeedsTheDefaultOrBoundsModeAndValidSettings) {
   SensorSettings bad;
   bad.self_rest_exclusion = 0.5;
   EXPECT_THROW(SensorWorld{bad}, Error);
+  for (double edges : {-0.5, std::nan(""), HUGE_VAL}) {
+    SensorSettings wrong;
+    wrong.self_radius_edges = edges;
+    try {
+      SensorWorld world{wrong};
+      ADD_FAILURE() << "self_radius_edges = " << edges << " accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("self_radius_edges"), std::string::npos) << e.what();
+    }
+  }
 }
 
 }  // namespace

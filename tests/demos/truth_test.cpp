@@ -43,6 +43,12 @@ std::vector<TruthBody> randomSoup(std::uint64_t seed, int bodies, int triangles)
   return out;
 }
 
+std::vector<std::vector<Triangle>> trianglesOf(const std::vector<TruthBody>& bodies) {
+  std::vector<std::vector<Triangle>> out;
+  for (const TruthBody& b : bodies) out.push_back(b.triangles);
+  return out;
+}
+
 void expectSame(const TruthResult& grid, const TruthResult& brute, const std::string& what) {
   ASSERT_EQ(grid.contacts.size(), brute.contacts.size()) << what;
   for (std::size_t i = 0; i < grid.contacts.size(); ++i) {
@@ -146,23 +152,24 @@ TEST(SelfTruth, GridEqualsBruteForceOnRandomSoups) {
   for (std::uint64_t seed = 1; seed <= 8; ++seed) {
     // Fewer bodies, more triangles each: a body's own triangles overlap.
     const auto bodies = randomSoup(seed, 1 + int(seed % 2), 120);
-    const auto rest = restOf(bodies, seed, 0.1);
+    SelfRule rule = selfRule(trianglesOf(bodies), restOf(bodies, seed, 0.1));
+    rule.radius_edges = seed % 4 < 2 ? 0.0 : 1.0;  // 2 × margin, or the mean edge (larger)
     for (int mode = 0; mode < 3; ++mode) {
       TruthSettings s;
       s.strict = mode != 2;
       s.full = mode != 1;
       s.band_absolute = seed % 2 ? 0.0 : 2e-3;
-      const TruthResult brute = groundTruthSelfBruteForce(bodies, rest, 2.0, s);
+      const TruthResult brute = groundTruthSelfBruteForce(bodies, rule, s);
       const std::string what = "seed " + std::to_string(seed) + " mode " + std::to_string(mode);
-      expectSame(truth.computeSelf(bodies, rest, 2.0, s), brute, what);
+      expectSame(truth.computeSelf(bodies, rule, s), brute, what);
       for (const TruthContact& c : brute.contacts) ASSERT_EQ(c.key.vertex_body, c.key.triangle_body) << what;
       if (mode == 0) {
         strict_seen += brute.strict_inside;
         // The same without exclusion at rest (a rest shape far apart): what the rule took out.
-        auto apart = rest;
-        for (auto& body : apart)
+        SelfRule apart = rule;
+        for (auto& body : apart.rest)
           for (std::size_t v = 0; v < body.size(); ++v) body[v] *= 1e3 * double(v + 1);
-        excluded_seen += groundTruthSelfBruteForce(bodies, apart, 2.0, s).strict_inside - brute.strict_inside;
+        excluded_seen += groundTruthSelfBruteForce(bodies, apart, s).strict_inside - brute.strict_inside;
       }
     }
   }
@@ -174,7 +181,7 @@ TEST(SelfTruth, FoldedClothAgainstBruteForceAndTheInitialShapeAsRest) {
   // cloth_fold (Bullet's pipeline: no self-collision) with the scene's initial mesh as rest shape,
   // at the step its halves touch most.
   const Scene scene = makeScene("cloth_fold", SceneParams{});
-  const std::vector<std::vector<Vec3>> rest = {scene.bodies[0].mesh.vertices};
+  const SelfRule rule = selfRule({scene.bodies[0].mesh.triangles}, {scene.bodies[0].mesh.vertices});
   TruthSettings s;
   s.band_absolute = 1e-6;
   GroundTruth truth;
@@ -184,7 +191,7 @@ TEST(SelfTruth, FoldedClothAgainstBruteForceAndTheInitialShapeAsRest) {
   int step = 0;
   sw.world().after_collision = [&] {
     bodies = bodiesOf(sw);
-    const TruthResult& r = truth.computeSelf(bodies, rest, 2.0, s);
+    const TruthResult& r = truth.computeSelf(bodies, rule, s);
     if (step == 0) first_step_contacts = r.contacts.size();
     if (r.strict_inside > most_strict) most_strict = r.strict_inside, most = bodies;
   };
@@ -192,8 +199,8 @@ TEST(SelfTruth, FoldedClothAgainstBruteForceAndTheInitialShapeAsRest) {
   // The flat cloth at its first step touches itself nowhere the rule leaves in.
   EXPECT_EQ(first_step_contacts, 0u);
   ASSERT_GT(most_strict, 20u) << "the folded cloth should touch itself";
-  const TruthResult brute = groundTruthSelfBruteForce(most, rest, 2.0, s);
-  expectSame(truth.computeSelf(most, rest, 2.0, s), brute, "cloth_fold");
+  const TruthResult brute = groundTruthSelfBruteForce(most, rule, s);
+  expectSame(truth.computeSelf(most, rule, s), brute, "cloth_fold");
 }
 
 TEST(SelfTruth, TheInitialMeshExcludesWhatThePluginsFirstStepExcludes) {
@@ -208,11 +215,15 @@ TEST(SelfTruth, TheInitialMeshExcludesWhatThePluginsFirstStepExcludes) {
     sw.step();
     const std::vector<Vec3>& initial = scene.bodies[0].mesh.vertices;
     const TruthBody& first = bodies.at(0);
+    const SelfRule by_initial_rule = selfRule({first.triangles}, {initial});
+    const SelfRule by_first_rule = selfRule({first.triangles}, {first.x});
+    const double radius = by_initial_rule.radius(first, 0);
+    EXPECT_NEAR(by_first_rule.radius(first, 0), radius, 1e-6 * radius) << name;
     std::size_t excluded = 0;
     for (Index v = 0; v < initial.size(); ++v)
       for (const Triangle& t : first.triangles) {
-        const bool by_initial = testkit::selfPairExcluded(v, t, initial, first.margin, 2.0);
-        ASSERT_EQ(by_initial, testkit::selfPairExcluded(v, t, first.x, first.margin, 2.0)) << name << " vertex " << v;
+        const bool by_initial = testkit::selfPairExcluded(v, t, initial, radius, 2.0);
+        ASSERT_EQ(by_initial, testkit::selfPairExcluded(v, t, first.x, radius, 2.0)) << name << " vertex " << v;
         excluded += by_initial;
       }
     EXPECT_GT(excluded, 3 * initial.size()) << name << ": the rule excludes every vertex's own neighbourhood";

@@ -61,6 +61,11 @@ struct ExactCounts {
 /// The candidates' indices must be valid for the bodies' m_nodes / m_faces.
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body,
                               const psc::CandidatePair* first, const psc::CandidatePair* last);
+/// The same at a given contact radius (what takes the place of the two margins' sum, the motion
+/// term still added): a body against itself at its self contact radius
+/// (psc::SensorWorld::selfRadius) rather than at twice its margin. Contacts carry it as m_margin.
+ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body, btScalar radius,
+                              const psc::CandidatePair* first, const psc::CandidatePair* last);
 
 // --- the geometry, in double -------------------------------------------------------------------
 

@@ -51,9 +51,10 @@ void forEachContact(const std::vector<Vec3>& points, const std::vector<Vec3>& co
 
 /// The self-collision exclusion rule (psc::SensorWorld::setSelfCollision), written apart from the
 /// core: vertex v and triangle t of one body are never a self contact when t holds v, or when v was
-/// closer to t than rest_exclusion × (2 × margin) in the body's rest shape `rest` (what touches at
-/// rest is the surface itself, not a fold).
-bool selfPairExcluded(Index v, const Triangle& t, const std::vector<Vec3>& rest, double margin, double rest_exclusion);
+/// closer to t than rest_exclusion × self_radius (the body's self contact radius) in the body's
+/// rest shape `rest` (what touches at rest is the surface itself, not a fold).
+bool selfPairExcluded(Index v, const Triangle& t, const std::vector<Vec3>& rest, double self_radius,
+                      double rest_exclusion);
 
 /// The thesis's candidate sets of one flagged region pair in one direction (§3.5), from the
 /// definition alone: the vertices of region `vertex_region` of the vertex body (with `one_ring`,
