@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+
+#include <Eigen/SVD>
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -534,6 +536,116 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
   ctx.counters.candidate_probes += probes;
 }
 
+/// [beyond] The rest-shape bound of self-collision. Each region r of a body gets a rigid motion
+/// T_r(p) = c_r + R_r (p − ĉ_r) that carries its rest shape close to where it is now (ĉ_r, c_r the
+/// rest and current centroids of its vertices, R_r the rotation of the polar decomposition of
+/// their cross-covariance), and each chunk c the largest deviation dev_c = |x_u − T_r(rest_u)|
+/// over the vertices its triangles use (its table). A rigid motion keeps distances, so for a
+/// vertex v of chunk a and a triangle t of chunk b carried by one motion T,
+///   dist_now(v, t) ≥ dist_rest(v, t) − dev_a(T) − dev_b(T),
+/// and a pair the exclusion rule leaves in was at least E = self_rest_exclusion × R apart at
+/// rest. So when E − dev_a − dev_b reaches beyond every vertex's reach, no pair of (a, b) can be a
+/// candidate: the surface there has not bent enough since rest to touch itself. A flat cloth or a
+/// ball that keeps its shape costs two passes over its vertices, not its box tests. Any rigid
+/// motion gives a valid bound; the fit only makes it tight. Chunks of two regions use a's motion
+/// for both: dev_b(T_a) ≤ dev_b + |T_b(q_b) − T_a(q_b)| + ‖R_b − R_a‖_F ρ_b over b's rest
+/// sphere (centre q_b, radius ρ_b).
+class RestFit {
+ public:
+  void fit(const Body& X) {
+    const std::size_t regions = X.regionCount(), chunks = X.chunks.count();
+    const std::vector<Vec3>& rest = X.rest;
+    motion_.resize(regions);
+    for (Index r = 0; r < regions; ++r) {
+      Vec3 sx = Vec3::Zero(), sr = Vec3::Zero();
+      Eigen::Matrix3d xr = Eigen::Matrix3d::Zero();
+      double n = 0.0;
+      for (Index c = X.chunks.region_begin[r]; c < X.chunks.region_begin[r + 1]; ++c)
+        for (Index v : X.chunks.vertices(c)) {
+          const Vec3 x = X.positions[v];
+          sx += x;
+          sr += rest[v];
+          xr.noalias() += x * rest[v].transpose();
+          n += 1.0;
+        }
+      Motion& m = motion_[r];
+      if (n == 0.0) {
+        m = Motion{};
+        continue;
+      }
+      m.c = sx / n;
+      m.rc = sr / n;
+      // Σ (x − c)(rest − ĉ)ᵀ = Σ x restᵀ − n c ĉᵀ; its polar factor is the best rotation.
+      const Eigen::Matrix3d cov = xr - n * m.c * m.rc.transpose();
+      const Eigen::JacobiSVD<Eigen::Matrix3d> svd(cov, Eigen::ComputeFullU | Eigen::ComputeFullV);
+      Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+      if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0) d(2, 2) = -1.0;
+      m.rot = svd.matrixU() * d * svd.matrixV().transpose();
+      m.offset = m.c - m.rot * m.rc;
+    }
+    dev_.resize(chunks);
+    rest_center_.resize(chunks);
+    rest_radius_.resize(chunks);
+    region_dev_.assign(regions, 0.0);
+    region_lo_.assign(regions, Vec3::Constant(std::numeric_limits<double>::infinity()));
+    region_hi_.assign(regions, Vec3::Constant(-std::numeric_limits<double>::infinity()));
+    const std::vector<Index>& table = X.chunks.table;
+    for (Index c = 0; c < chunks; ++c) {
+      const Motion& m = motion_[X.chunks.region_of[c]];
+      double dev2 = 0.0;
+      Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+      for (Index at = X.chunks.table_begin[c]; at < X.chunks.table_begin[c + 1]; ++at) {
+        const Index u = table[at];
+        const Vec3& p = rest[u];
+        dev2 = std::max(dev2, (X.positions[u] - m.offset - m.rot * p).squaredNorm());
+        lo = lo.cwiseMin(p);
+        hi = hi.cwiseMax(p);
+      }
+      dev_[c] = std::sqrt(dev2);
+      rest_center_[c] = 0.5 * (lo + hi);
+      rest_radius_[c] = 0.5 * (hi - lo).norm();
+      const Index r = X.chunks.region_of[c];
+      region_dev_[r] = std::max(region_dev_[r], dev_[c]);
+      region_lo_[r] = region_lo_[r].cwiseMin(lo);
+      region_hi_[r] = region_hi_[r].cwiseMax(hi);
+    }
+  }
+
+  /// Whether no (vertex of chunk a, triangle of chunk b) pair can be a candidate: the bound above
+  /// clears `reach`, the largest reach of a's vertices (exclusion: E).
+  bool apart(const Body& X, Index a, Index b, double exclusion, double reach) const {
+    return clears(X.chunks.region_of[a], dev_[a], X.chunks.region_of[b], dev_[b], rest_center_[b], rest_radius_[b],
+                  exclusion, reach);
+  }
+  /// The same for every pair between regions i and j (both directions; `reach` the larger of the two).
+  bool apartRegions(Index i, Index j, double exclusion, double reach) const {
+    const Vec3 center = 0.5 * (region_lo_[j] + region_hi_[j]);
+    return clears(i, region_dev_[i], j, region_dev_[j], center, 0.5 * (region_hi_[j] - region_lo_[j]).norm(), exclusion,
+                  reach);
+  }
+
+ private:
+  /// E − dev_a − dev_b(T_ra) ≥ reach, with b (in region rb) measured against a's region's motion.
+  bool clears(Index ra, double dev_a, Index rb, double dev_b, const Vec3& center_b, double radius_b, double exclusion,
+              double reach) const {
+    if (ra != rb) {
+      const Motion &ma = motion_[ra], &mb = motion_[rb];
+      dev_b += (mb.offset - ma.offset + (mb.rot - ma.rot) * center_b).norm() + (mb.rot - ma.rot).norm() * radius_b;
+    }
+    // The bound is computed in double from the same positions the distances are: a relative 1e-9
+    // keeps its own rounding on the safe side.
+    return exclusion - dev_a - dev_b >= reach * (1.0 + 1e-9);
+  }
+
+  struct Motion {
+    Vec3 c = Vec3::Zero(), rc = Vec3::Zero(), offset = Vec3::Zero();
+    Eigen::Matrix3d rot = Eigen::Matrix3d::Identity();
+  };
+  std::vector<Motion> motion_;
+  std::vector<double> dev_, rest_radius_, region_dev_;
+  std::vector<Vec3> rest_center_, region_lo_, region_hi_;
+};
+
 struct Group {
   BodyId vb, tb;
   std::vector<std::uint64_t> keys;
@@ -602,8 +714,20 @@ class Collector {
     const Axis no_axis;
     const PairContext ctx{X, X, radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude};
     const auto t0 = std::chrono::steady_clock::now();
+    // The rest-shape bound needs the radius bound's reach (a swept pair may meet during the step).
+    const bool rest_bound = params_.self_rest_bound && !params_.swept;
+    // The largest reach of the vertices in box b (reachOf of the largest radius and coordinate).
+    const auto reachIn = [&](const MotionBox& b) {
+      return (radius + mf * b.motion) * (1.0 + 1e-5) + 1e-6 * std::max(b.lo.cwiseAbs().maxCoeff(), b.hi.cwiseAbs().maxCoeff());
+    };
+    if (rest_bound) rest_fit_.fit(X);
     for (const auto& [ri, rj] : region_pairs_) {
       ++counters_.self_region_pairs;
+      if (rest_bound &&
+          rest_fit_.apartRegions(ri, rj, exclude, std::max(reachIn(X.region_box[ri]), reachIn(X.region_box[rj])))) {
+        ++counters_.self_region_pairs_unbent;
+        continue;
+      }
       nearChunks(X, ri, half, boxes[rj], no_axis, s_.near_a);
       if (s_.near_a.empty()) continue;
       const bool same = ri == rj;
@@ -636,8 +760,15 @@ class Collector {
       for (const auto& [ka, kb] : chunk_pairs_) {
         ChunkRef& ca = s_.near_a[ka];
         ChunkRef& cb = other[kb];
-        chunkCandidates(ctx, ca, cb);
-        if (&ca != &cb) chunkCandidates(ctx, cb, ca);
+        const auto collect = [&](ChunkRef& cv, ChunkRef& ct) {
+          if (rest_bound && rest_fit_.apart(X, cv.chunk, ct.chunk, exclude, reachIn(X.chunk_box[cv.chunk]))) {
+            ++counters_.self_chunk_pairs_unbent;
+            return;
+          }
+          chunkCandidates(ctx, cv, ct);
+        };
+        collect(ca, cb);
+        if (&ca != &cb) collect(cb, ca);
       }
     }
     counters_.ms_candidates += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -759,6 +890,7 @@ class Collector {
   Scratch s_;
   std::vector<std::pair<Index, Index>> region_pairs_, chunk_pairs_;
   std::vector<Grown> self_boxes_;
+  RestFit rest_fit_;
 };
 
 }  // namespace

@@ -31,6 +31,7 @@ struct CullParams {
   bool use_sensors = true;     ///< false: Flagging::Bounds (the ablation)
   double self_rest_exclusion = 2.0;  ///< SensorSettings::self_rest_exclusion
   double self_radius_edges = 1.0;    ///< SensorSettings::self_radius_edges
+  bool self_rest_bound = true;       ///< SensorSettings::self_rest_bound
 };
 
 /// The pairs (i < j) of `bodies` whose grown body boxes overlap, by sort-and-sweep, sorted.

@@ -90,6 +90,11 @@ struct SensorSettings {
   /// rest (below) grows with it: parts closer at rest than self_rest_exclusion × this radius
   /// never collide, so a mesh too coarse for its folds (tube_coil at 300 vertices) passes through.
   double self_radius_edges = 1.25;
+  /// [beyond] Self-collision: rule out a body's chunk pairs whose surface has not bent since its
+  /// rest shape enough to touch itself (a rigid motion fitted to each region carries the rest shape
+  /// to within a measured deviation of where it is now; docs/METHOD.md §6.3). Off = box tests only.
+  /// MotionBound::Radius only.
+  bool self_rest_bound = true;
   /// Self-collision: a vertex and a triangle of one body closer than this × the self contact
   /// radius in the body's rest shape are never self candidates (SensorWorld::setSelfCollision). ≥ 1.
   double self_rest_exclusion = 2.0;

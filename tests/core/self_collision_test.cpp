@@ -95,12 +95,23 @@ TEST(SelfCollision, FlatClothHasNoSelfCandidatesFoldedClothHasEveryPairOfItsLaye
   const BodyId id = w.addBody(d);
   EXPECT_TRUE(w.selfCollision(id));
 
-  // Lying flat: neighbours are within the radius, but all of them are excluded.
+  // Lying flat: neighbours are within the radius, but all of them are excluded; the rest-shape
+  // bound sees the unmoved cloth and rules it out whole, and without it the rule takes them out.
   const StepResult& flat = w.step();
   std::size_t dup = 0;
   EXPECT_TRUE(selfCandidates(flat, id, dup).empty());
   EXPECT_EQ(flat.stats.self_candidate_pairs, 0u);
-  EXPECT_GT(flat.stats.self_excluded_pairs, 0u) << "the flat cloth's neighbours are within reach";
+  EXPECT_EQ(flat.stats.self_excluded_pairs, 0u);
+  EXPECT_EQ(flat.stats.self_region_pairs_unbent, flat.stats.self_region_pairs);
+  {
+    SensorSettings boxes_only;
+    boxes_only.self_rest_bound = false;
+    SensorWorld w0(boxes_only);
+    const BodyId id0 = w0.addBody(d);
+    const StepResult& flat0 = w0.step();
+    EXPECT_TRUE(selfCandidates(flat0, id0, dup).empty());
+    EXPECT_GT(flat0.stats.self_excluded_pairs, 0u) << "the flat cloth's neighbours are within reach";
+  }
 
   // Folded in two, the layers 0.03 apart (inside R = 1.25 × the mean edge 0.0567 > 2 × margin):
   // every pair the brute force finds between the layers is a candidate, exactly once, and nothing
@@ -175,6 +186,56 @@ TEST(SelfCollision, ARoundBallCannotTouchItself) {
   std::size_t dup = 0;
   EXPECT_TRUE(selfCandidates(res, id, dup).empty());
   EXPECT_EQ(res.stats.self_candidate_pairs, 0u);
+}
+
+TEST(SelfCollision, TheRestShapeBoundDropsOnlyPairsThatCannotTouch) {
+  // A ball moved rigidly (turned, shifted, with a previous position for the motion term), then
+  // squashed by more and more until its top and bottom meet: the rest-shape bound must keep every
+  // candidate that the boxes alone keep, and rule out the chunk pairs of the shape that has not
+  // bent.
+  const TriMesh ball = makeSphere(1.0, 1500);
+  const Eigen::Matrix3d turn = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  const Vec3 shift(0.3, -2.0, 0.5), step(0.01, -0.02, 0.005);
+  std::size_t unbent_seen = 0, pairs_seen = 0;
+  for (double squash : {1.0, 0.8, 0.5, 0.2, 0.1}) {
+    std::vector<Vec3> now = ball.vertices, before = ball.vertices;
+    for (std::size_t v = 0; v < now.size(); ++v) {
+      Vec3 p = ball.vertices[v];
+      p.z() *= squash;
+      now[v] = turn * p + shift;
+      before[v] = now[v] - step * (1.0 + 0.1 * std::sin(double(v)));
+    }
+    std::set<std::pair<Index, Index>> got[2];
+    StepStats stats[2];
+    for (int bound = 0; bound < 2; ++bound) {
+      SensorSettings s;
+      s.self_rest_bound = bound == 1;
+      SensorWorld w(s);
+      BodyDesc d;
+      d.triangles = ball.triangles;
+      d.positions = PositionView::of(ball.vertices);
+      d.margin = 0.01;
+      d.self_collision = true;  // the round ball is the rest shape
+      const BodyId id = w.addBody(d);
+      w.step();
+      w.setPositions(id, PositionView::of(now), PositionView::of(before));
+      const StepResult& res = w.step();
+      std::size_t dup = 0;
+      got[bound] = selfCandidates(res, id, dup);
+      EXPECT_EQ(dup, 0u);
+      stats[bound] = res.stats;
+    }
+    EXPECT_EQ(got[1], got[0]) << "squash " << squash;
+    EXPECT_EQ(stats[0].self_chunk_pairs_unbent + stats[0].self_region_pairs_unbent, 0u) << "off means off";
+    if (squash == 1.0) {
+      EXPECT_TRUE(got[1].empty()) << "a rigidly moved ball cannot touch itself";
+      EXPECT_GT(stats[1].self_region_pairs_unbent + stats[1].self_chunk_pairs_unbent, 0u);
+    }
+    unbent_seen += stats[1].self_chunk_pairs_unbent + stats[1].self_region_pairs_unbent;
+    pairs_seen += got[1].size();
+  }
+  EXPECT_GT(pairs_seen, 1000u) << "the flattest balls touch themselves";
+  EXPECT_GT(unbent_seen, 0u);
 }
 
 TEST(SelfCollision, TwoBodiesAndSelfPairsComeOutTogetherSortedByBodies) {
