@@ -104,7 +104,8 @@ std::size_t countNodes(const btDbvtNode* n) {
 }  // namespace
 
 std::size_t bulletMidphaseBytes(const btSoftBody& body) {
-  return (countNodes(body.m_ndbvt.m_root) + countNodes(body.m_fdbvt.m_root)) * sizeof(btDbvtNode);
+  return (countNodes(body.m_ndbvt.m_root) + countNodes(body.m_fdbvt.m_root) + countNodes(body.m_cdbvt.m_root)) *
+         sizeof(btDbvtNode);
 }
 
 }  // namespace psc::demo

@@ -37,7 +37,8 @@ class ZoneTimer {
 /// dispatcher would process.
 std::size_t countVFExactTests(btSoftRigidDynamicsWorld& world);
 
-/// Bytes of the node tree and the face tree of one body (nodes × sizeof(btDbvtNode)).
+/// Bytes of the node tree, the face tree and the cluster tree (only after generateClusters) of one
+/// body (nodes × sizeof(btDbvtNode)).
 std::size_t bulletMidphaseBytes(const btSoftBody& body);
 
 }  // namespace psc::demo

@@ -6,6 +6,7 @@
 #include <BulletSoftBody/btSoftBodyInternals.h>
 #include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
 
+#include <algorithm>
 #include <chrono>
 #include <set>
 
@@ -60,6 +61,35 @@ void TimedSoftBodySolver::predictMotion(btScalar dt) {
   const auto t2 = std::chrono::steady_clock::now();
   predict_ms_ = msSince(t0, t1);
   face_refit_ms_ = msSince(t1, t2);
+}
+
+void TimedSoftBodySolver::solveConstraints(btScalar dt) {
+  btDefaultSoftBodySolver::solveConstraints(dt);
+  joints_before_self_ = 0;  // 0 in psc_demo: the cluster solve has just deleted its contact joints
+  for (int i = 0; i < m_softBodySet.size(); ++i)
+    joints_before_self_ += static_cast<std::size_t>(m_softBodySet[i]->m_joints.size());
+  self_pass_start_ = std::chrono::steady_clock::now();
+}
+
+void TimedSoftBodySolver::updateSoftBodies() {
+  std::size_t joints = 0;
+  for (int i = 0; i < m_softBodySet.size(); ++i) {
+    btSoftBody* psb = m_softBodySet[i];
+    if (call_cluster_self_ && psb->m_clusters.size() > 0) {
+      btSoftColliders::CollideCL_SS collide;
+      collide.ProcessSoftSoft(psb, psb);
+    }
+    joints += static_cast<std::size_t>(psb->m_joints.size());
+  }
+  self_pass_ms_ = msSince(self_pass_start_, std::chrono::steady_clock::now());
+  self_cluster_contacts_ = joints - std::min(joints, joints_before_self_);
+  btDefaultSoftBodySolver::updateSoftBodies();
+}
+
+std::size_t jointCount(const std::vector<btSoftBody*>& bodies) {
+  std::size_t n = 0;
+  for (const btSoftBody* psb : bodies) n += static_cast<std::size_t>(psb->m_joints.size());
+  return n;
 }
 
 btSoftBody* createSoftBody(btSoftBodyWorldInfo& info, const SoftBodySpec& spec, int collision_flags,
@@ -126,6 +156,7 @@ SceneWorld::SceneWorld(const Scene& scene, const WorldOptions& options) : scene_
   solver_ = std::make_unique<btSequentialImpulseConstraintSolver>();
   soft_solver_ = std::make_unique<TimedSoftBodySolver>();
   soft_solver_->setSplit(options.split_face_refit);
+  soft_solver_->setCallClusterSelf(options.call_cluster_self);
   world_ = std::make_unique<SceneDynamicsWorld>(dispatcher_.get(), broadphase_.get(), solver_.get(), config_.get(),
                                                 soft_solver_.get());
   world_->setGravity(bt(scene.gravity));
@@ -151,6 +182,7 @@ SceneWorld::SceneWorld(const Scene& scene, const WorldOptions& options) : scene_
   for (const SoftBodySpec& spec : scene.bodies) {
     btSoftBody* psb = createSoftBody(world_info_, spec, options.soft_collision_flags, scene.position_iterations,
                                      options.fast_vf_setup);
+    if (options.clusters > 0) psb->generateClusters(options.clusters);
     world_->addSoftBody(psb);
     soft_.push_back(psb);
     face_ranges_.emplace_back(&psb->m_faces[0], &psb->m_faces[0] + psb->m_faces.size());

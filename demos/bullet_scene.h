@@ -6,7 +6,8 @@
 //  - TimedSoftBodySolver: Bullet's default solver, with the face-tree refit (done in
 //    btSoftBody::predictMotion only when VF_SS built a face tree) split off and timed, because it
 //    exists only for soft-soft collision while the node-tree refit beside it is paid by every
-//    pipeline.
+//    pipeline; and the world's self-collision pass (between the soft solve and updateSoftBodies)
+//    timed, where Bullet's cluster self-collision happens.
 #pragma once
 
 #include "scenes.h"
@@ -17,6 +18,7 @@
 #include <BulletSoftBody/btSoftRigidDynamicsWorld.h>
 #include <btBulletDynamicsCommon.h>
 
+#include <chrono>
 #include <functional>
 #include <memory>
 #include <vector>
@@ -44,13 +46,33 @@ class TimedSoftBodySolver : public btDefaultSoftBodySolver {
   double lastPredictMs() const { return predict_ms_; }   ///< everything else in predictMotion
   std::size_t faceRefitSkipped() const { return skipped_; }
 
+  /// btSoftRigidDynamicsWorld runs its self-collision pass (psb->defaultCollisionHandler(psb) for
+  /// every body) between solveConstraints and updateSoftBodies: the two overrides time it.
+  void solveConstraints(btScalar dt) override;
+  /// With setCallClusterSelf(true), first Bullet's own cluster self-collision for every body that
+  /// has clusters: btSoftColliders::CollideCL_SS::ProcessSoftSoft(psb, psb), the call the CL_SS
+  /// case of defaultCollisionHandler(psb) makes for CL_SELF and which Bullet 3.24 never reaches
+  /// (docs/BULLET.md, "Self-collision"). Its contacts are cluster joints, solved next step.
+  void updateSoftBodies() override;
+  void setCallClusterSelf(bool on) { call_cluster_self_ = on; }
+  double lastSelfPassMs() const { return self_pass_ms_; }                    ///< the world's self pass (+ the call)
+  std::size_t lastSelfClusterContacts() const { return self_cluster_contacts_; }  ///< joints it made
+
  private:
   std::vector<std::pair<btSoftBody*, btDbvtNode*>> detached_;
   double face_refit_ms_ = 0.0;
   double predict_ms_ = 0.0;
   std::size_t skipped_ = 0;
   bool split_ = true;
+  bool call_cluster_self_ = false;
+  std::chrono::steady_clock::time_point self_pass_start_;
+  std::size_t joints_before_self_ = 0;
+  double self_pass_ms_ = 0.0;
+  std::size_t self_cluster_contacts_ = 0;
 };
+
+/// Joints of the bodies: Bullet's cluster contacts are joints (psc_demo makes no other joint).
+std::size_t jointCount(const std::vector<btSoftBody*>& bodies);
 
 struct WorldOptions {
   /// btSoftBody::m_cfg.collisions of every soft body. Bullet's own soft-soft pipeline needs VF_SS
@@ -61,6 +83,11 @@ struct WorldOptions {
   bool fast_vf_setup = true;
   /// Time the face-tree refit separately (TimedSoftBodySolver); false = Bullet's solver as is.
   bool split_face_refit = true;
+  /// > 0: btSoftBody::generateClusters(clusters) on every soft body before it joins the world
+  /// (Bullet's cluster collision; soft_collision_flags then say CL_SS, CL_SELF).
+  int clusters = 0;
+  /// TimedSoftBodySolver::setCallClusterSelf: Bullet's cluster self-collision called directly.
+  bool call_cluster_self = false;
   /// Runs after the world exists and before any body is added (e.g. installs a midphase).
   std::function<void(SceneDynamicsWorld&)> before_bodies;
 };

@@ -12,13 +12,16 @@
 #include <algorithm>
 #include <cstdio>
 #include <iostream>
+#include <limits>
 #include <sstream>
 
 using namespace psc::demo;
 
 namespace {
 
-std::vector<std::size_t> parseValues(const std::vector<std::string>& tokens) {
+/// Comma-separated positive whole numbers up to `max`; `option` names the option in the message.
+std::vector<std::size_t> parseValues(const std::vector<std::string>& tokens, const std::string& option,
+                                     unsigned long long max = std::numeric_limits<std::size_t>::max()) {
   std::vector<std::size_t> values;
   for (const std::string& token : tokens) {
     std::stringstream in(token);
@@ -31,7 +34,11 @@ std::vector<std::size_t> parseValues(const std::vector<std::string>& tokens) {
       } catch (const std::exception&) {
         pos = 0;
       }
-      if (pos != item.size() || v == 0) throw psc::Error(psc::ErrorCode::InvalidArgument, "--sweep: '" + item + "' is not a positive whole number");
+      const bool digits = item.find_first_not_of("0123456789") == std::string::npos;  // stoull takes "-3", " 3"
+      if (!digits || pos != item.size() || v == 0 || v > max)
+        throw psc::Error(psc::ErrorCode::InvalidArgument,
+                         option + ": '" + item + "' is not a positive whole number" +
+                             (digits && v > max ? " up to " + std::to_string(max) : ""));
       values.push_back(static_cast<std::size_t>(v));
     }
   }
@@ -62,7 +69,7 @@ int main(int argc, char** argv) {
   SceneParams params;
   std::size_t steps = 0, warmup = 0, frame_every = 1;
   std::string pipeline = "both", flagging = "default", truth = "both", exact = "bullet", json, csv, frames, plot_dir;
-  std::vector<std::string> sweep;
+  std::vector<std::string> sweep, bullet_clusters;
   bool list = false, no_penetration = false, self_collision = false;
   app.add_option("--scene", scenes, "scene name or number, repeatable, or 'all' (default: all; see --list-scenes)");
   app.add_option("--resolution", params.resolution, "vertices per body (default 1000)")->check(CLI::Range(14, 10000000));
@@ -93,6 +100,18 @@ int main(int argc, char** argv) {
   app.add_option("--sweep", sweep, "resolution|bodies followed by values, e.g. --sweep resolution 500,1000,2000")
       ->expected(2, 1000)
       ->type_name("KIND VALUES");
+  app.add_option("--bullet-clusters", bullet_clusters,
+                 "Bullet's cluster self-collision, to compare with --self-collision. After the runs of "
+                 "--pipeline (whichever it is), two more Bullet runs per K, every body given "
+                 "btSoftBody::generateClusters(K) and cluster collision instead of VF_SS: bullet_clK with "
+                 "SDF_RS|CL_SS|CL_SELF as Bullet documents it (in Bullet 3.24 this matches no case of "
+                 "defaultCollisionHandler: no cluster contact at all), and bullet_clK_direct with SDF_RS|CL_SS "
+                 "and Bullet's cluster self-collision (CollideCL_SS on the body with itself) called in the "
+                 "world's self pass. K: positive whole numbers (Bullet caps K at the body's node count). "
+                 "Not in the plots or the B/ours ratios; best with --truth none (their contacts are "
+                 "cluster joints, not vertex-face contacts)")
+      ->type_name("K[,K...]")
+      ->expected(1, 1000);
   app.add_option("--json", json, "write results as JSON");
   app.add_option("--csv", csv, "write results as CSV");
   app.add_option("--frames", frames, "write a VTK series per run into DIR (open the .pvd in ParaView)");
@@ -159,6 +178,13 @@ int main(int argc, char** argv) {
     options.json = json;
     options.csv = csv;
     options.plot_dir = plot_dir;
+    if (!bullet_clusters.empty()) {
+      for (std::size_t k : parseValues(bullet_clusters, "--bullet-clusters",
+                                       static_cast<unsigned long long>(std::numeric_limits<int>::max())))
+        options.bullet_clusters.push_back(static_cast<int>(k));
+      if (options.bullet_clusters.empty())
+        throw psc::Error(psc::ErrorCode::InvalidArgument, "--bullet-clusters: no cluster count given");
+    }
 
     std::vector<Job> jobs;
     if (sweep.empty()) {
@@ -167,7 +193,7 @@ int main(int argc, char** argv) {
       const std::string kind = sweep.front();
       if (kind != "resolution" && kind != "bodies")
         throw psc::Error(psc::ErrorCode::InvalidArgument, "--sweep: '" + kind + "' is neither 'resolution' nor 'bodies'");
-      const std::vector<std::size_t> values = parseValues({sweep.begin() + 1, sweep.end()});
+      const std::vector<std::size_t> values = parseValues({sweep.begin() + 1, sweep.end()}, "--sweep");
       if (values.empty()) throw psc::Error(psc::ErrorCode::InvalidArgument, "--sweep " + kind + ": no values given");
       for (const std::string& s : scenes) {
         const SceneInfo* info = findScene(s);

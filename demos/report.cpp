@@ -110,7 +110,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["resolution"] = r.resolution;
   j["bodies"] = r.bodies;
   j["steps"] = r.steps;
-  j["pipeline"] = toString(r.pipeline);
+  j["pipeline"] = runName(r);
   j["exact"] = r.exact;
   if (r.has_strict) {
     j["recall_strict"] = r.recall_strict;
@@ -146,6 +146,14 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["self_intersections_max"] = r.self_intersections_max;
   j["self_intersections_steps"] = r.self_intersections_steps;
   j["self_contacts_found"] = r.self_contacts_found_total;
+  if (r.bullet_clusters > 0) {
+    // Bullet's cluster runs (--bullet-clusters): k, how the self-collision ran, the cluster contacts.
+    j["bullet_clusters"] = r.bullet_clusters;
+    j["cluster_self"] = r.cluster_self_direct ? "direct" : "flags";
+    j["cluster_contacts"] = r.cluster_contacts_total;
+    j["self_cluster_contacts"] = r.self_cluster_contacts_total;
+    j["cluster_self_ms_mean"] = r.stage_ms_mean.cluster_self;
+  }
   if (r.has_self_truth) {
     j["self_recall_strict"] = r.self_recall_strict;
     j["truth_self_strict_contacts"] = r.self_truth_strict_total;
@@ -213,10 +221,12 @@ nlohmann::ordered_json toJson(const MachineInfo& machine, const std::vector<RunR
 }
 
 void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
-  const char* head =
-      "%-12s %6s %4s %5s %-8s %15s %15s %6s %7s %8s %7s %8s %8s %6s %8s %7s %6s\n";
+  // The run column is as wide as the longest run name (Bullet's cluster runs), at least 8.
+  int name_width = 8;
+  for (const RunResult& r : runs) name_width = std::max(name_width, static_cast<int>(runName(r).size()));
+  const char* head = "%-12s %6s %4s %5s %-*s %15s %15s %6s %7s %8s %7s %8s %8s %6s %8s %7s %6s\n";
   char line[512];
-  std::snprintf(line, sizeof line, head, "scene", "res", "bod", "steps", "pipeline", "strict all/wst",
+  std::snprintf(line, sizeof line, head, "scene", "res", "bod", "steps", name_width, "pipeline", "strict all/wst",
                 "full all/wst", "pairs", "outside", "exact/st", "flag/st", "coll ms", "step ms", "B/ours", "max pen",
                 "pen n", "MB");
   out << line;
@@ -232,7 +242,7 @@ void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
                                                                 : 0.0;
     const std::string ratio = b_over_ours > 0 ? fixed(b_over_ours, 2) : "";
     std::snprintf(line, sizeof line, head, r.scene.c_str(), std::to_string(r.resolution).c_str(),
-                  std::to_string(r.bodies).c_str(), std::to_string(r.steps).c_str(), toString(r.pipeline), strict.c_str(),
+                  std::to_string(r.bodies).c_str(), std::to_string(r.steps).c_str(), name_width, runName(r).c_str(), strict.c_str(),
                   full.c_str(), pairs.c_str(), outside.c_str(), count(r.exact_tests_per_step).c_str(), flagged.c_str(),
                   ms(r.collision_ms_mean).c_str(), ms(r.step_ms_mean).c_str(), ratio.c_str(),
                   fixed(r.max_penetration, 3).c_str(),

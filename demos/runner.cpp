@@ -157,6 +157,12 @@ const char* toString(Pipeline p) {
     default: return "bullet";
   }
 }
+std::string runName(Pipeline p, int bullet_clusters, bool cluster_self_direct) {
+  if (p != Pipeline::Bullet || bullet_clusters <= 0) return toString(p);
+  return "bullet_cl" + std::to_string(bullet_clusters) + (cluster_self_direct ? "_direct" : "");
+}
+std::string runName(const RunResult& r) { return runName(r.pipeline, r.bullet_clusters, r.cluster_self_direct); }
+
 const char* toString(FlaggingMode f) { return f == FlaggingMode::Thesis ? "thesis" : "default"; }
 const char* toString(TruthMode t) {
   switch (t) {
@@ -219,7 +225,11 @@ RunResult describeRun(const Scene& scene, Pipeline pipeline, const RunOptions& o
   if (pipeline == Pipeline::Sensors) r.flagging = toString(opt.flagging);
   if (pipeline == Pipeline::Bounds) r.flagging = "bounds";
   r.exact = pipeline == Pipeline::Bullet ? "bullet" : opt.exact;
-  r.self_collision = pipeline != Pipeline::Bullet && opt.self_collision;
+  if (pipeline == Pipeline::Bullet && opt.bullet_clusters > 0) {
+    r.bullet_clusters = opt.bullet_clusters;
+    r.cluster_self_direct = opt.cluster_self_direct;
+  }
+  r.self_collision = (pipeline != Pipeline::Bullet && opt.self_collision) || r.bullet_clusters > 0;
   r.bodies = scene.bodies.size();
   r.resolution = scene.resolution();
   r.steps = opt.steps ? opt.steps : scene.default_steps;
@@ -305,20 +315,30 @@ class Run {
   double far_out_ = 1.0;             ///< far enough out to mean the simulation blew up
   StepRecord* current_ = nullptr;    ///< the record of the step under way
   Clock::time_point detect_start_;
+  std::size_t joints_before_detect_ = 0;  ///< cluster contacts of the last self pass, not yet solved
 };
 
-WorldOptions worldOptions(Pipeline pipeline) {
+WorldOptions worldOptions(Pipeline pipeline, const RunOptions& opt) {
   WorldOptions wo;
   if (pipeline != Pipeline::Bullet) {
     if (!SensorPipeline::available())
       throw Error(ErrorCode::InvalidArgument, "this psc_demo was built without psc::bullet: use --pipeline bullet");
     wo.soft_collision_flags = SensorPipeline::bodyCollisionFlags();
+  } else if (opt.bullet_clusters > 0) {
+    // Bullet's cluster collision instead of VF_SS. As documented: CL_SS | CL_SELF. Bullet 3.24's
+    // defaultCollisionHandler switches on (flags & SVSmask) with SVSmask = 0xf0, which holds CL_SELF,
+    // so no case matches: no cluster contact at all. Direct: CL_SS alone (clusters between bodies
+    // through Bullet) and the self pass calls what the CL_SS case would call for CL_SELF.
+    using F = btSoftBody::fCollision;
+    wo.soft_collision_flags = F::SDF_RS | F::CL_SS | (opt.cluster_self_direct ? 0 : F::CL_SELF);
+    wo.clusters = opt.bullet_clusters;
+    wo.call_cluster_self = opt.cluster_self_direct;
   }
   return wo;
 }
 
 Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool strict, bool full)
-    : scene_(scene), pipeline_(pipeline), opt_(opt), world_(scene, worldOptions(pipeline)) {
+    : scene_(scene), pipeline_(pipeline), opt_(opt), world_(scene, worldOptions(pipeline, opt)) {
   if (pipeline != Pipeline::Bullet)
     sensors_ = std::make_unique<SensorPipeline>(world_, coreFlagging(pipeline, opt.flagging), opt.exact,
                                                 opt.self_collision);
@@ -326,6 +346,7 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
   truth_settings_.full = full;
   world_.world().before_collision = [this] {
     zone_.arm(true);
+    joints_before_detect_ = jointCount(world_.softBodies());
     detect_start_ = Clock::now();
   };
   world_.world().addAction(&after_actions_);  // after the plugin's
@@ -333,6 +354,7 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
     zone_.arm(false);
     current_->ms.detect = msSince(detect_start_);
     const auto h0 = Clock::now();
+    current_->n.cluster_contacts = jointCount(world_.softBodies()) - joints_before_detect_;
     afterCollision();
     current_->ms.hooks += msSince(h0);
   };
@@ -348,7 +370,9 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
   }
   if (!opt.frames_dir.empty()) {
     frames_ = std::make_unique<FrameSeries>(
-        opt.frames_dir, opt.frames_name.empty() ? scene.name + "_" + toString(pipeline) : opt.frames_name);
+        opt.frames_dir, opt.frames_name.empty()
+                             ? scene.name + "_" + runName(pipeline, opt.bullet_clusters, opt.cluster_self_direct)
+                             : opt.frames_name);
     std::vector<std::pair<Vec3, Vec3>> boxes;
     for (const StaticBoxSpec& b : scene.statics) boxes.emplace_back(b.center, b.half_extents);
     frames_->writeStatic(boxes);
@@ -367,6 +391,10 @@ void Run::step(StepRecord& rec) {
   rec.ms.face_refit = world_.softSolver().lastFaceRefitMs();
   rec.ms.traversal_exact = zone_.takeMs();  // ours: pairs handed back to Bullet
   zone_.takeCount();
+  if (opt_.bullet_clusters > 0 && pipeline_ == Pipeline::Bullet) {
+    rec.ms.cluster_self = world_.softSolver().lastSelfPassMs();
+    rec.n.self_cluster_contacts = world_.softSolver().lastSelfClusterContacts();
+  }
   if (sensors_) sensors_->takeStep(rec);
   current_ = nullptr;
 }
@@ -567,6 +595,8 @@ void summariseCounts(RunResult& r) {
     r.self_contacts_outside_truth += n.self_outside_truth;
     r.tunnelled_total += n.tunnelled_vertices;
     r.tunnelled_worst_step = std::max(r.tunnelled_worst_step, n.tunnelled_vertices);
+    r.cluster_contacts_total += n.cluster_contacts;
+    r.self_cluster_contacts_total += n.self_cluster_contacts;
   }
   const double steps = static_cast<double>(r.steps);
   r.recall_strict = r.truth_strict_total ? double(r.found_in_strict) / double(r.truth_strict_total) : 1.0;
@@ -591,7 +621,8 @@ void summariseTimes(RunResult& r) {
   static constexpr double StepTimes::*kParts[] = {
       &StepTimes::step,        &StepTimes::hooks,    &StepTimes::truth,      &StepTimes::crossings,
       &StepTimes::detect,
-      &StepTimes::face_refit,  &StepTimes::traversal_exact, &StepTimes::sensor_step, &StepTimes::exact,
+      &StepTimes::face_refit,  &StepTimes::traversal_exact, &StepTimes::cluster_self,
+      &StepTimes::sensor_step, &StepTimes::exact,
       &StepTimes::particle,    &StepTimes::refit,    &StepTimes::flagging,   &StepTimes::candidates,
       &StepTimes::repartition, &StepTimes::core_total};
   const std::size_t first = std::min(r.warmup, r.per_step.size());

@@ -3,7 +3,10 @@
 // Pipelines: `sensors` (psc::bullet, the default Flagging::SensorsAndBounds, or with
 // --flagging thesis the thesis's flag-only Flagging::Sensors), `bounds` (the same plugin pipeline
 // with Flagging::Bounds: the sensor stage switched off, boxes only; the ablation) and `bullet`
-// (Bullet's own VF_SS path).
+// (Bullet's own VF_SS path). Bullet's cluster runs (RunOptions::bullet_clusters = k, --bullet-clusters)
+// are `bullet` runs with another soft-soft path: generateClusters(k) on every body and
+// SDF_RS | CL_SS | CL_SELF instead of SDF_RS | VF_SS (run `bullet_cl<k>`), or SDF_RS | CL_SS with
+// the cluster self-collision called directly (run `bullet_cl<k>_direct`; docs/BULLET.md).
 //
 // Collision ms (one definition for every pipeline, StepTimes::collision()): the wall time a step
 // spends finding soft-soft contacts, excluding what all pipelines pay identically.
@@ -18,6 +21,10 @@
 //             the candidates)
 //           + the face-tree refit and the zone if any body or pair was still left to Bullet
 //             (normally 0: no VF_SS)
+//   bullet cluster runs
+//           = the zone during collision detection (CL_SS between bodies: cluster trees + GJK)
+//           + the world's self-collision pass after the soft solve (cluster self-collision)
+//             (updateClusters in predictMotion, which refits the cluster tree, is left in step ms)
 // Excluded from all: the node-tree refit in predictMotion (Bullet always does it; soft-rigid
 // uses that tree), broadphase, soft-rigid collision, the solvers.
 // Step ms: wall time of stepSimulation minus the time the measurement hooks took inside it.
@@ -45,6 +52,11 @@ enum class TruthMode { None, Strict, Full, Both };
 enum class FlaggingMode { Default, Thesis };
 
 const char* toString(Pipeline p);
+struct RunResult;
+/// The run's name in the table, the JSON's "pipeline" and the CSV: toString(pipeline), or for
+/// Bullet's cluster runs bullet_cl<k> and bullet_cl<k>_direct.
+std::string runName(Pipeline p, int bullet_clusters = 0, bool cluster_self_direct = false);
+std::string runName(const RunResult& r);
 const char* toString(TruthMode t);
 const char* toString(FlaggingMode f);
 
@@ -61,6 +73,11 @@ struct RunOptions {
   /// Self-collision on every body of our pipelines (psc::bullet::Settings::self_collision), and the
   /// self truth for every pipeline. Bullet's own pipeline has none and stays as it is.
   bool self_collision = false;
+  /// > 0: a Bullet cluster run (only with Pipeline::Bullet): generateClusters(bullet_clusters) on
+  /// every body; CL_SS | CL_SELF as Bullet documents it, or with cluster_self_direct CL_SS and the
+  /// cluster self-collision called directly (TimedSoftBodySolver::setCallClusterSelf).
+  int bullet_clusters = 0;
+  bool cluster_self_direct = false;
 };
 
 /// Everything a run measured, summarised from its per-step records. Fields that do not apply are
@@ -72,7 +89,12 @@ struct RunResult {
   Pipeline pipeline = Pipeline::Bullet;
   std::string flagging;           ///< ours: "default", "thesis" or "bounds"; empty for Bullet's
   std::string exact = "bullet";   ///< exact test of the run (Bullet's own pipeline: always bullet)
-  bool self_collision = false;    ///< RunOptions::self_collision (the pipeline itself: ours only)
+  bool self_collision = false;    ///< the pipeline itself: ours with RunOptions::self_collision, Bullet's cluster runs
+  int bullet_clusters = 0;        ///< RunOptions::bullet_clusters (0: not a cluster run)
+  bool cluster_self_direct = false;
+  /// Bullet's cluster runs: cluster contacts (joints) made between bodies and of a body with
+  /// itself, summed over the steps (StepCounts::cluster_contacts, self_cluster_contacts).
+  std::size_t cluster_contacts_total = 0, self_cluster_contacts_total = 0;
   bool has_strict = false, has_full = false;
   double recall_strict = 1.0, recall_full = 1.0;
   double recall_strict_worst_step = 1.0, recall_full_worst_step = 1.0;

@@ -26,6 +26,9 @@ struct StepTimes {
   /// The BT_PROFILE zone "Deformable Collision": Bullet's node-tree vs face-tree traversal and
   /// every CollideVF_SS test. For our pipelines only the pairs the plugin handed back to Bullet.
   double traversal_exact = 0.0;
+  /// Bullet's cluster runs only (--bullet-clusters): the world's self-collision pass after the soft
+  /// solve, where cluster self-collision happens (TimedSoftBodySolver::lastSelfPassMs). 0 otherwise.
+  double cluster_self = 0.0;
   // Our pipelines, from psc::bullet::Stats (0 for Bullet's).
   double sensor_step = 0.0;      ///< Stats::ms_sensor_step: body sync + SensorWorld::step()
   double exact = 0.0;            ///< Stats::ms_exact: the exact stage on the candidates
@@ -37,7 +40,7 @@ struct StepTimes {
   double core_total = 0.0;       ///< StepStats::ms_total: the whole SensorWorld::step()
 
   /// Soft-soft collision time of the step, one definition for every pipeline (see runner.h).
-  double collision() const { return face_refit + traversal_exact + sensor_step + exact; }
+  double collision() const { return face_refit + traversal_exact + cluster_self + sensor_step + exact; }
 };
 
 /// Counts of one step.
@@ -72,6 +75,9 @@ struct StepCounts {
   /// Vertices whose path over the step passed through a moving triangle of another body, of those
   /// that had no soft-soft contact in the step (crossings.h).
   std::size_t tunnelled_vertices = 0;
+  /// Bullet's cluster runs: contacts (joints) its cluster collision made between bodies during
+  /// collision detection, and of a body with itself in the self pass.
+  std::size_t cluster_contacts = 0, self_cluster_contacts = 0;
 };
 
 struct StepRecord {

@@ -40,7 +40,7 @@ double units(const Scene& s, std::size_t steps, std::size_t pipelines) {
 }
 
 std::string summary(const RunResult& r) {
-  std::string s = std::string(toString(r.pipeline)) + ": " + fmt("%.3g", r.collision_ms_mean) + " ms coll, " +
+  std::string s = runName(r) + ": " + fmt("%.3g", r.collision_ms_mean) + " ms coll, " +
                   fmt("%.3g", r.step_ms_mean) + " ms step (means)";
   if (r.has_strict) s += ", strict " + fmt("%.4f", r.recall_strict);
   if (r.has_strict && r.truth_strict_untestable)
@@ -58,17 +58,21 @@ std::string summary(const RunResult& r) {
          ", " + std::to_string(r.self_contacts_found_total) + " self contacts";
     if (r.has_full) s += " (" + std::to_string(r.self_contacts_outside_truth) + " outside)";
   }
+  if (r.bullet_clusters > 0)
+    s += ", cluster contacts " + std::to_string(r.cluster_contacts_total) + " between bodies, " +
+         std::to_string(r.self_cluster_contacts_total) + " self";
   if (r.runaway_steps)
     s += ", RUNAWAY in " + std::to_string(r.runaway_steps) + " steps (first: " + r.runaway_warning + ")";
   if (r.diverged_at_step >= 0) s += ", DIVERGED after step " + std::to_string(r.diverged_at_step);
   return s;
 }
 
-/// Collision-time ratios (means) between the runs of one job, written into every run of it.
+/// Collision-time ratios (means) between the runs of one job, written into every run of it;
+/// Bullet's cluster runs are not among them.
 void setRatios(std::vector<RunResult>& job_runs) {
   const auto collisionMean = [&](Pipeline p) {
     for (const RunResult& r : job_runs)
-      if (r.pipeline == p) return r.collision_ms_mean;
+      if (r.pipeline == p && r.bullet_clusters == 0) return r.collision_ms_mean;
     return 0.0;
   };
   const double sensors = collisionMean(Pipeline::Sensors), bounds = collisionMean(Pipeline::Bounds),
@@ -115,8 +119,20 @@ SuiteOptions defaultSuiteOptions() {
 
 int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ostream& out, std::ostream& progress) {
   const MachineInfo machine = machineInfo();
-  progress << "psc_demo: " << jobs.size() << " scene run(s) × " << options.pipelines.size() << " pipeline(s), truth "
-           << toString(options.run.truth) << "; " << machineLine(machine) << "\n";
+  // Every pipeline, then two Bullet cluster runs per --bullet-clusters value.
+  struct Variant {
+    Pipeline pipeline;
+    int clusters;
+    bool direct;
+  };
+  std::vector<Variant> variants;
+  for (Pipeline p : options.pipelines) variants.push_back({p, 0, false});
+  for (int k : options.bullet_clusters)
+    for (bool direct : {false, true}) variants.push_back({Pipeline::Bullet, k, direct});
+  progress << "psc_demo: " << jobs.size() << " scene run(s) × " << options.pipelines.size() << " pipeline(s)";
+  if (!options.bullet_clusters.empty())
+    progress << " + " << 2 * options.bullet_clusters.size() << " Bullet cluster run(s)";
+  progress << ", truth " << toString(options.run.truth) << "; " << machineLine(machine) << "\n";
   std::vector<RunResult> results;
   int status = 0;
   double seconds_per_unit = 1.5e-6, done_units = 0, done_seconds = 0;
@@ -127,14 +143,14 @@ int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ost
     try {
       const Scene scene = makeScene(job.scene, job.params);
       const std::size_t steps = job.steps ? job.steps : scene.default_steps;
-      const double u = units(scene, steps, options.pipelines.size());
+      const double u = units(scene, steps, variants.size());
       double remaining = 0;
       for (std::size_t k = i; k < jobs.size(); ++k) {
         // Later jobs are estimated from their parameters alone (building their meshes would cost).
         const std::size_t res = jobs[k].params.resolution;
         const std::size_t bodies = jobs[k].params.bodies ? jobs[k].params.bodies : (findScene(jobs[k].scene)->default_bodies);
         const std::size_t st = jobs[k].steps ? jobs[k].steps : findScene(jobs[k].scene)->default_steps;
-        remaining += double(res * bodies * st * options.pipelines.size());
+        remaining += double(res * bodies * st * variants.size());
       }
       progress << "[" << i + 1 << "/" << jobs.size() << "] " << scene.name << " (scene " << findScene(scene.name)->number
                << "): " << scene.bodies.size() << " bodies x " << scene.resolution() << " vertices, " << steps
@@ -143,14 +159,17 @@ int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ost
       if (!scene.note.empty()) progress << "      " << scene.note << "\n";
       progress.flush();
       std::vector<RunResult> job_runs;
-      for (Pipeline p : options.pipelines) {
+      for (const Variant& v : variants) {
+        const Pipeline p = v.pipeline;
         RunOptions ro = options.run;
+        ro.bullet_clusters = v.clusters;
+        ro.cluster_self_direct = v.direct;
         ro.steps = steps;
         ro.self_collision = ro.self_collision || job.self_collision;
         if (job.warmup) ro.warmup = job.warmup;
         if (!ro.frames_dir.empty())
           ro.frames_name = scene.name + "_" + std::to_string(scene.resolution()) + "v_" +
-                           std::to_string(scene.bodies.size()) + "b_" + toString(p);
+                           std::to_string(scene.bodies.size()) + "b_" + runName(p, v.clusters, v.direct);
         RunResult r = runPipeline(scene, p, ro);
         r.series = job.series;
         progress << "      " << summary(r) << "\n";
@@ -194,7 +213,14 @@ int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ost
     if (!options.plot_dir.empty()) {
       if (!gnuplotAvailable())
         progress << "warning: gnuplot not found, no PNG plots (data and scripts written to " << options.plot_dir << ")\n";
-      for (const std::string& png : writePlots(results, options.plot_dir)) out << "wrote " << png << "\n";
+      // The plots show the pipelines: Bullet's cluster runs are left out.
+      std::vector<RunResult> without_clusters;
+      if (!options.bullet_clusters.empty())
+        for (const RunResult& r : results)
+          if (r.bullet_clusters == 0) without_clusters.push_back(r);
+      for (const std::string& png : writePlots(options.bullet_clusters.empty() ? results : without_clusters,
+                                               options.plot_dir))
+        out << "wrote " << png << "\n";
     }
     if (!options.run.frames_dir.empty())
       out << "frames in " << options.run.frames_dir << " (open the *_surface.pvd files in ParaView)\n";

@@ -24,6 +24,10 @@ struct Job {
 struct SuiteOptions {
   std::vector<Pipeline> pipelines = {Pipeline::Sensors, Pipeline::Bullet};
   RunOptions run;                    ///< truth, penetration, frames (steps come from the job)
+  /// --bullet-clusters: after the pipelines, for each k two Bullet cluster runs of every job,
+  /// bullet_cl<k> (CL_SS | CL_SELF as documented) and bullet_cl<k>_direct (runner.h). Left out of
+  /// the collision-time ratios and the plots.
+  std::vector<int> bullet_clusters;
   std::string json, csv, plot_dir;   ///< empty = not written
 };
 
