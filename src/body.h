@@ -163,6 +163,42 @@ inline bool flaggedLess(const FlaggedPair& a, const FlaggedPair& b) {
   return a.region_b < b.region_b;
 }
 
+/// [beyond] The rest-shape bound of self-collision (docs/METHOD.md §6.3), riding on the refit.
+/// Per region r a rotation R_r; the refit's pass puts each vertex's y = x − R_r·rest into a box
+/// per chunk (its own chunk and the chunks whose triangles it is in, each with its chunk's region's
+/// rotation), so that every rigid motion p ↦ R_r p + k deviates from a chunk's vertices by at most
+/// the distance from k to the farthest corner of the chunk's y-box. The same pass sums what the
+/// next step's R_r needs (the rotation that best carries the region's rest shape onto its current
+/// vertices). Nothing of it is read per vertex after the pass.
+struct RestFit {
+  bool built = false;  ///< the set-up part matches the body's chunks and rest shape
+  // Set-up (rest shape and chunks).
+  std::vector<double> region_count;       ///< own vertices of each region
+  std::vector<Vec3> region_rest_mean;     ///< their rest centroid
+  std::vector<Vec3> chunk_rest_center;    ///< the rest sphere of each chunk's vertex table
+  std::vector<double> chunk_rest_radius;
+  std::vector<Vec3> region_rest_center;   ///< the rest sphere of each region's tables
+  std::vector<double> region_rest_radius;
+  // Carried from one step to the next.
+  std::vector<Eigen::Matrix3d> fit;       ///< per region, the last fit (empty before the first)
+  std::vector<Eigen::Matrix3d> next_rot;  ///< per region, the rotation the next pass uses
+  // This step's (valid when `filled`).
+  bool filled = false;
+  std::vector<Eigen::Matrix3d> rot;  ///< per region, the rotation of this step's y-boxes
+  std::vector<Vec3> chunk_lo, chunk_hi;
+  std::vector<Vec3> chunk_center;    ///< centre of each chunk's y-box
+  std::vector<double> chunk_half;    ///< its half diagonal
+  std::vector<Vec3> region_center;   ///< the same for the union of a region's chunks
+  std::vector<double> region_half;
+  std::vector<Vec3> region_sum_x;           ///< Σ x over the region's own vertices
+  std::vector<Eigen::Matrix3d> region_xr;   ///< Σ x restᵀ over them
+  std::size_t bytes() const {
+    const std::size_t regions = region_count.capacity(), chunks = chunk_rest_radius.capacity();
+    return regions * (2 * sizeof(double) + 4 * sizeof(Vec3) + 4 * sizeof(Eigen::Matrix3d)) +
+           chunks * (2 * sizeof(double) + 4 * sizeof(Vec3));
+  }
+};
+
 struct Body {
   BodyId id = kInvalidBody;
   std::string name;
@@ -182,6 +218,7 @@ struct Body {
   std::vector<Vec3> rest;
   double rest_mean_edge = 0.0;  ///< mean edge length of `rest` (the self contact radius's base)
   bool selfCollides() const { return !rest.empty(); }
+  RestFit rest_fit;  ///< rebuilt (built = false) whenever `rest` or the chunks change
   MeshReport report;
   std::size_t vertices_in_triangles = 0;
 

@@ -68,9 +68,63 @@ Vec3 load(const char* base, std::size_t stride, Index v) {
 // per-call type switch), and grows the box of the vertex's own chunk and of each chunk whose
 // triangles it is in. `sum` keeps a NaN that min/max would drop silently.
 // With `swept`, a vertex's previous position goes into the same boxes instead of a motion term.
-template <typename T>
+/// The refit's pass without the rest-shape bound.
+struct NoRestFit {
+  void own(std::size_t /*v*/, Index /*c*/, const Vec3& /*x*/) {}
+  void foreign(std::size_t /*v*/, Index /*c*/, const Vec3& /*x*/) {}
+};
+
+/// The rest-shape bound's part of the refit's pass (RestFit in body.h): y = x − R_r·rest into the
+/// y-box of each chunk the vertex is in, and Σ x, Σ x restᵀ for the vertex's own region, summed
+/// here while the region stays the same (vertices of one region mostly come in runs).
+class RestFitPass {
+ public:
+  RestFitPass(RestFit& f, const ChunkLists& ch, const std::vector<Vec3>& rest) : f_(f), ch_(ch), rest_(rest) {}
+  [[gnu::always_inline]] void own(std::size_t v, Index c, const Vec3& x) {
+    const Index r = ch_.region_of[c];
+    if (r != region_) switchTo(r);
+    const Vec3& p = rest_[v];
+    y_ = x - rot_ * p;
+    f_.chunk_lo[c] = f_.chunk_lo[c].cwiseMin(y_);
+    f_.chunk_hi[c] = f_.chunk_hi[c].cwiseMax(y_);
+    sum_x_ += x;
+    xr_.noalias() += x * p.transpose();
+  }
+  [[gnu::always_inline]] void foreign(std::size_t v, Index c, const Vec3& x) {
+    const Index r = ch_.region_of[c];
+    const Vec3 y = r == region_ ? y_ : Vec3(x - f_.rot[r] * rest_[v]);
+    f_.chunk_lo[c] = f_.chunk_lo[c].cwiseMin(y);
+    f_.chunk_hi[c] = f_.chunk_hi[c].cwiseMax(y);
+  }
+  /// Adds the current run's sums to its region; call once after the pass.
+  void flush() {
+    if (region_ == kInvalidIndex) return;
+    f_.region_sum_x[region_] += sum_x_;
+    f_.region_xr[region_] += xr_;
+    sum_x_.setZero();
+    xr_.setZero();
+  }
+
+ private:
+  [[gnu::noinline]] void switchTo(Index r) {
+    flush();
+    region_ = r;
+    rot_ = f_.rot[r];
+  }
+
+  RestFit& f_;
+  const ChunkLists& ch_;
+  const std::vector<Vec3>& rest_;
+  Eigen::Matrix3d rot_ = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d xr_ = Eigen::Matrix3d::Zero();
+  Vec3 sum_x_ = Vec3::Zero();
+  Vec3 y_ = Vec3::Zero();
+  Index region_ = kInvalidIndex;
+};
+
+template <typename T, typename Hook>
 void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev, std::size_t prev_stride,
-                 bool swept, std::vector<MotionBox>& boxes, double& sum) {
+                 bool swept, std::vector<MotionBox>& boxes, double& sum, Hook& hook) {
   const std::size_t n = ch.chunk_of.size();
   for (std::size_t v = 0; v < n; ++v) {
     // Positions usually live inside larger records (Bullet's nodes are 256 bytes): fetch ahead.
@@ -81,6 +135,7 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
     const T* p = reinterpret_cast<const T*>(base + v * stride);
     const double x = static_cast<double>(p[0]), y = static_cast<double>(p[1]), z = static_cast<double>(p[2]);
     sum += x + y + z;
+    hook.own(v, c, Vec3(x, y, z));
     MotionBox& box = boxes[c];
     box.lo = box.lo.cwiseMin(Vec3(x, y, z));
     box.hi = box.hi.cwiseMax(Vec3(x, y, z));
@@ -104,6 +159,7 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
       MotionBox& fb = boxes[f];
       fb.lo = fb.lo.cwiseMin(q_lo);
       fb.hi = fb.hi.cwiseMax(q_hi);
+      hook.foreign(v, f, Vec3(x, y, z));
     }
   }
 }
@@ -121,9 +177,141 @@ void measureChunk(const ChunkLists& ch, Index chunk, const char* base, std::size
   }
 }
 
+/// The rest-shape bound's set-up (rest spheres, region rest centroids; rotations to identity) when
+/// the body's chunks or rest shape changed, and the per-step part's reset before the pass.
+void startRestFit(Body& b) {
+  RestFit& f = b.rest_fit;
+  const ChunkLists& ch = b.chunks;
+  const std::size_t regions = b.regionCount(), chunks = ch.count();
+  if (!f.built || f.region_count.size() != regions || f.chunk_rest_radius.size() != chunks) {
+    f = RestFit{};
+    f.region_count.assign(regions, 0.0);
+    f.region_rest_mean.assign(regions, Vec3::Zero());
+    f.chunk_rest_center.resize(chunks);
+    f.chunk_rest_radius.resize(chunks);
+    f.region_rest_center.resize(regions);
+    f.region_rest_radius.resize(regions);
+    for (Index r = 0; r < regions; ++r) {
+      Vec3 rlo = Vec3::Constant(std::numeric_limits<double>::infinity()), rhi = -rlo;
+      for (Index c = ch.region_begin[r]; c < ch.region_begin[r + 1]; ++c) {
+        for (Index v : ch.vertices(c)) {
+          f.region_rest_mean[r] += b.rest[v];
+          f.region_count[r] += 1.0;
+        }
+        Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+        for (Index at = ch.table_begin[c]; at < ch.table_begin[c + 1]; ++at) {
+          lo = lo.cwiseMin(b.rest[ch.table[at]]);
+          hi = hi.cwiseMax(b.rest[ch.table[at]]);
+        }
+        f.chunk_rest_center[c] = 0.5 * (lo + hi);
+        f.chunk_rest_radius[c] = 0.5 * (hi - lo).norm();
+        rlo = rlo.cwiseMin(lo);
+        rhi = rhi.cwiseMax(hi);
+      }
+      if (f.region_count[r] > 0.0) f.region_rest_mean[r] /= f.region_count[r];
+      f.region_rest_center[r] = 0.5 * (rlo + rhi);
+      f.region_rest_radius[r] = 0.5 * (rhi - rlo).norm();
+    }
+    f.next_rot.assign(regions, Eigen::Matrix3d::Identity());
+    f.built = true;
+  }
+  f.filled = false;
+  f.rot = f.next_rot;
+  f.chunk_lo.assign(chunks, Vec3::Constant(std::numeric_limits<double>::infinity()));
+  f.chunk_hi.assign(chunks, Vec3::Constant(-std::numeric_limits<double>::infinity()));
+  f.region_sum_x.assign(regions, Vec3::Zero());
+  f.region_xr.assign(regions, Eigen::Matrix3d::Zero());
+}
+
+/// The rotation R that maximises tr(Rᵀ A), i.e. the rotation of A's polar decomposition, by the
+/// iteration of Müller et al. 2016 ("A robust method to extract the rotational part of
+/// deformations") started from `start`: each round turns R by the axis-angle Σ rᵢ × aᵢ / |Σ rᵢ·aᵢ|
+/// of its columns and A's. Any rotation keeps the bound sound; the iteration only makes it tight,
+/// and from last step's rotation it converges in a few rounds. The result is re-orthonormalised
+/// through a unit quaternion so that rounding does not build up from step to step.
+Eigen::Matrix3d rotationOf(const Eigen::Matrix3d& a, const Eigen::Matrix3d& start) {
+  Eigen::Matrix3d rot = start;
+  const double scale = a.norm();
+  if (!(scale > 0.0) || !std::isfinite(scale)) return start;
+  for (int round = 0; round < 20; ++round) {
+    const Vec3 torque = rot.col(0).cross(a.col(0)) + rot.col(1).cross(a.col(1)) + rot.col(2).cross(a.col(2));
+    const double align = std::abs(rot.col(0).dot(a.col(0)) + rot.col(1).dot(a.col(1)) + rot.col(2).dot(a.col(2)));
+    const Vec3 omega = torque / (align + 1e-9 * scale);
+    const double angle = omega.norm();
+    if (!(angle > 1e-9)) break;
+    rot = Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix() * rot;
+  }
+  Eigen::Quaterniond q(rot);
+  q.normalize();
+  return q.toRotationMatrix();
+}
+
+/// After the pass: each region's fit (the rotation that best carries its rest shape onto its
+/// vertices now), each chunk's and region's y-box as centre and half diagonal, and the rotation
+/// the next pass starts from: this fit turned once more by its turn since the last fit (a body
+/// spinning at a steady rate is followed without lag). When the fit turned away from the rotation
+/// the pass used by more than a tenth of a mean rest edge over the region's rest sphere (a sudden
+/// turn, or the first step after a jump), the region's y-boxes are redone with the fit: a second
+/// pass over that region's tables only.
+void finishRestFit(Body& b) {
+  RestFit& f = b.rest_fit;
+  const ChunkLists& ch = b.chunks;
+  const std::size_t regions = b.regionCount(), chunks = ch.count();
+  f.chunk_center.resize(chunks);
+  f.chunk_half.resize(chunks);
+  f.region_center.resize(regions);
+  f.region_half.resize(regions);
+  const bool first = f.fit.size() != regions;
+  if (first) f.fit.assign(regions, Eigen::Matrix3d::Identity());
+  const auto centreAndHalf = [](const Vec3& lo, const Vec3& hi, Vec3& centre, double& half) {
+    if ((lo.array() <= hi.array()).all()) {
+      centre = 0.5 * (lo + hi);
+      half = 0.5 * (hi - lo).norm();
+    } else {  // no vertex: nothing of it can be in a pair
+      centre = Vec3::Zero();
+      half = 0.0;
+    }
+  };
+  const double tolerance = 0.1 * b.rest_mean_edge;
+  for (Index r = 0; r < regions; ++r) {
+    const double n = f.region_count[r];
+    if (n > 0.0) {
+      // Σ (x − c)(rest − ĉ)ᵀ = Σ x restᵀ − n c ĉᵀ.
+      const Vec3 c = f.region_sum_x[r] / n;
+      const Eigen::Matrix3d fit = rotationOf(f.region_xr[r] - n * c * f.region_rest_mean[r].transpose(), f.rot[r]);
+      if ((fit - f.rot[r]).norm() * f.region_rest_radius[r] > tolerance) {
+        f.rot[r] = fit;
+        for (Index k = ch.region_begin[r]; k < ch.region_begin[r + 1]; ++k) {
+          Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+          for (Index at = ch.table_begin[k]; at < ch.table_begin[k + 1]; ++at) {
+            const Index u = ch.table[at];
+            const Vec3 y = b.positions[u] - fit * b.rest[u];
+            lo = lo.cwiseMin(y);
+            hi = hi.cwiseMax(y);
+          }
+          f.chunk_lo[k] = lo;
+          f.chunk_hi[k] = hi;
+        }
+      }
+      Eigen::Quaterniond next(first ? fit : Eigen::Matrix3d(fit * f.fit[r].transpose() * fit));
+      next.normalize();
+      f.next_rot[r] = next.toRotationMatrix();
+      f.fit[r] = fit;
+    }
+    Vec3 rlo = Vec3::Constant(std::numeric_limits<double>::infinity()), rhi = -rlo;
+    for (Index c = ch.region_begin[r]; c < ch.region_begin[r + 1]; ++c) {
+      centreAndHalf(f.chunk_lo[c], f.chunk_hi[c], f.chunk_center[c], f.chunk_half[c]);
+      rlo = rlo.cwiseMin(f.chunk_lo[c]);
+      rhi = rhi.cwiseMax(f.chunk_hi[c]);
+    }
+    centreAndHalf(rlo, rhi, f.region_center[r], f.region_half[r]);
+  }
+  f.filled = true;
+}
+
 }  // namespace
 
-void refitBounds(Body& b, bool measure, bool swept) {
+void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
   const ChunkLists& ch = b.chunks;
   b.chunk_box.assign(ch.count(), emptyBox());
   b.region_box.assign(b.regionCount(), emptyBox());
@@ -140,10 +328,23 @@ void refitBounds(Body& b, bool measure, bool swept) {
   const std::size_t prev_stride = b.previous.strideBytes();
   const bool is_float = b.positions.scalar() == PositionView::Scalar::Float32;
   double sum = 0.0;
-  if (is_float)
-    streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum);
-  else
-    streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum);
+  rest_fit = rest_fit && !swept && b.selfCollides();
+  if (rest_fit) {
+    startRestFit(b);
+    RestFitPass pass(b.rest_fit, ch, b.rest);
+    if (is_float)
+      streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, pass);
+    else
+      streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, pass);
+    pass.flush();
+  } else {
+    b.rest_fit.filled = false;
+    NoRestFit none;
+    if (is_float)
+      streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, none);
+    else
+      streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, none);
+  }
   bool finite = std::isfinite(sum);
   for (MotionBox& box : b.chunk_box) {
     box.motion = std::sqrt(box.motion);
@@ -187,6 +388,7 @@ void refitBounds(Body& b, bool measure, bool swept) {
     for (Index c = ch.region_begin[r]; c < ch.region_begin[r + 1]; ++c) grow(b.region_box[r], b.chunk_box[c]);
     grow(b.body_box, b.region_box[r]);
   }
+  if (rest_fit) finishRestFit(b);
 }
 
 namespace {
@@ -310,6 +512,7 @@ double reachOf(const Vec3& x, double r) {
 struct TriangleRec {
   Vec3 lo, hi;
   double nlo, nhi;  ///< extent along the sensor axis
+  Vec3 rest_mid = Vec3::Zero();  ///< self pairs: the triangle's centroid in the rest shape
 };
 
 /// The rest, read only for the pairs whose boxes meet (parallel to Scratch::tris).
@@ -323,14 +526,21 @@ struct TriangleCorners {
 /// the probe loop reads them two at a time (SSE2), without a branch per test.
 struct KeptTriangles {
   std::vector<double> lo_x, lo_y, lo_z, hi_x, hi_y, hi_z, n_lo, n_hi;
+  std::vector<double> mid_x, mid_y, mid_z;  ///< self pairs: rest centroids
   std::vector<Index> record;  ///< index into Scratch::tris / Scratch::corners
   std::vector<unsigned char> meets;  ///< per probe: 1 when the vertex's ball meets the triangle's box
   std::size_t size() const { return record.size(); }
   void clear() {
-    for (std::vector<double>* v : {&lo_x, &lo_y, &lo_z, &hi_x, &hi_y, &hi_z, &n_lo, &n_hi}) v->clear();
+    for (std::vector<double>* v : {&lo_x, &lo_y, &lo_z, &hi_x, &hi_y, &hi_z, &n_lo, &n_hi, &mid_x, &mid_y, &mid_z})
+      v->clear();
     record.clear();
   }
-  void push(const TriangleRec& tr, Index k) {
+  void push(const TriangleRec& tr, Index k, bool self) {
+    if (self) {
+      mid_x.push_back(tr.rest_mid.x());
+      mid_y.push_back(tr.rest_mid.y());
+      mid_z.push_back(tr.rest_mid.z());
+    }
     lo_x.push_back(tr.lo.x());
     lo_y.push_back(tr.lo.y());
     lo_z.push_back(tr.lo.z());
@@ -375,10 +585,16 @@ struct PairContext {
 
 /// Self-collision's exclusion rule: the triangle holds the vertex, or the two were within the
 /// exclusion distance in the body's rest shape.
+/// A corner of the triangle within the distance settles most pairs without the distance to the
+/// triangle (which is at most that corner's).
 bool excludedSelfPair(const PairContext& ctx, Index v, const Triangle& tri) {
   if (tri[0] == v || tri[1] == v || tri[2] == v) return true;
   const std::vector<Vec3>& rest = ctx.tb.rest;
-  return pointTriangleDistance2(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) < ctx.self_exclude2;
+  const Vec3& p = rest[v];
+  const Vec3 &a = rest[tri[0]], &b = rest[tri[1]], &c = rest[tri[2]];
+  const double e2 = ctx.self_exclude2;
+  if ((a - p).squaredNorm() < e2 || (b - p).squaredNorm() < e2 || (c - p).squaredNorm() < e2) return true;
+  return pointTriangleDistance2(p, a, b, c) < e2;
 }
 
 void gatherVertices(const PairContext& ctx, ChunkRef& c) {
@@ -408,6 +624,7 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
     const Triangle tri = ch.triangle(c.chunk, at);
     const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], cc = ctx.tb.positions[tri[2]];
     TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0};
+    if (ctx.self_exclude2 >= 0.0) rec.rest_mid = (ctx.tb.rest[tri[0]] + ctx.tb.rest[tri[1]] + ctx.tb.rest[tri[2]]) / 3.0;
     if (ctx.axis.valid) {
       const double pa = ctx.axis.project(a), pb = ctx.axis.project(b), pc = ctx.axis.project(cc);
       rec.nlo = std::min({pa, pb, pc});
@@ -431,11 +648,69 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   ctx.counters.candidate_triangles += ch.triangleCount(c.chunk);
 }
 
+/// meets[j] = 1 for each kept triangle j whose box the vertex's ball meets and whose extent along
+/// the sensor axis meets the vertex's [n_lo, n_hi], without a branch per test (about one triangle
+/// in ten passes; branches mispredicted). Pass 1 marks the triangles that pass, the caller gathers
+/// them: a running count inside the vector loop would chain every iteration to the one before
+/// (measured slower). With kSelf, a triangle whose rest centroid lies within the exclusion distance
+/// of the vertex's rest position does not pass: the triangle was at least as close, so the rule
+/// excludes the pair, and most self pairs the boxes keep are such neighbours.
+template <bool kSelf>
+bool markMeets(const KeptTriangles& kept, const VertexRec& vr, double n_lo, double n_hi, const Vec3& rest,
+               double exclude2, unsigned char* meets) {
+  const std::size_t m = kept.size();
+  const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
+  const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
+  const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
+  const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
+  const double *gx = kept.mid_x.data(), *gy = kept.mid_y.data(), *gz = kept.mid_z.data();
+  std::size_t j = 0;
+  int any = 0;
+#if defined(__SSE2__)
+  // Two triangles per instruction (SSE2 is part of x86-64); the same tests as the loop below.
+  {
+    const __m128d vx = _mm_set1_pd(x), vy = _mm_set1_pd(y), vz = _mm_set1_pd(z), vr2 = _mm_set1_pd(r2);
+    const __m128d vnl = _mm_set1_pd(n_lo), vnh = _mm_set1_pd(n_hi), zero = _mm_setzero_pd();
+    const __m128d px = _mm_set1_pd(rest.x()), py = _mm_set1_pd(rest.y()), pz = _mm_set1_pd(rest.z());
+    const __m128d e2 = _mm_set1_pd(exclude2);
+    for (; j + 2 <= m; j += 2) {
+      const __m128d dx = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(lx + j), vx), _mm_sub_pd(vx, _mm_loadu_pd(hx + j))));
+      const __m128d dy = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(ly + j), vy), _mm_sub_pd(vy, _mm_loadu_pd(hy + j))));
+      const __m128d dz = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(lz + j), vz), _mm_sub_pd(vz, _mm_loadu_pd(hz + j))));
+      const __m128d d2 = _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy)), _mm_mul_pd(dz, dz));
+      __m128d ok = _mm_and_pd(_mm_cmple_pd(d2, vr2), _mm_and_pd(_mm_cmpge_pd(vnh, _mm_loadu_pd(tnl + j)),
+                                                                _mm_cmple_pd(vnl, _mm_loadu_pd(tnh + j))));
+      if constexpr (kSelf) {
+        const __m128d ex = _mm_sub_pd(_mm_loadu_pd(gx + j), px), ey = _mm_sub_pd(_mm_loadu_pd(gy + j), py);
+        const __m128d ez = _mm_sub_pd(_mm_loadu_pd(gz + j), pz);
+        const __m128d g2 = _mm_add_pd(_mm_add_pd(_mm_mul_pd(ex, ex), _mm_mul_pd(ey, ey)), _mm_mul_pd(ez, ez));
+        ok = _mm_and_pd(ok, _mm_cmpge_pd(g2, e2));
+      }
+      const int mask = _mm_movemask_pd(ok);
+      any |= mask;
+      meets[j] = static_cast<unsigned char>(mask & 1);
+      meets[j + 1] = static_cast<unsigned char>(mask >> 1);
+    }
+  }
+#endif
+  for (; j < m; ++j) {
+    const double dx = std::max(0.0, std::max(lx[j] - x, x - hx[j]));
+    const double dy = std::max(0.0, std::max(ly[j] - y, y - hy[j]));
+    const double dz = std::max(0.0, std::max(lz[j] - z, z - hz[j]));
+    bool ok = dx * dx + dy * dy + dz * dz <= r2 && n_hi >= tnl[j] && n_lo <= tnh[j];
+    if constexpr (kSelf) ok = ok && (Vec3(gx[j], gy[j], gz[j]) - rest).squaredNorm() >= exclude2;
+    any |= static_cast<int>(ok);
+    meets[j] = ok;
+  }
+  return any != 0;
+}
+
 // Vertices of chunk cv (of ctx.vb) against the triangles owned by chunk ct (of ctx.tb).
 void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
   const std::size_t nt = ctx.tb.chunks.triangleCount(ct.chunk);
   if (nt == 0) return;
   const bool sensors = ctx.axis.valid;
+  const bool self = ctx.self_exclude2 >= 0.0;
   const MotionBox& tbox = ctx.tb.chunk_box[ct.chunk];
   gatherVertices(ctx, cv);
   const std::size_t nv = ctx.vb.chunks.vertices(cv.chunk).size();
@@ -462,7 +737,7 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
         const TriangleRec& tr = s.tris[static_cast<std::size_t>(ct.triangles_at) + k];
         if ((tr.lo.array() - g <= vbox.hi.array()).all() && (vbox.lo.array() <= tr.hi.array() + g).all() &&
             (!sensors || (tr.nhi + g >= cv.lo_n - vbox.g && tr.nlo - g <= cv.hi_n + vbox.g)))
-          kept.push(tr, static_cast<Index>(static_cast<std::size_t>(ct.triangles_at) + k));
+          kept.push(tr, static_cast<Index>(static_cast<std::size_t>(ct.triangles_at) + k), self);
       }
       s.hits.resize(kept.size());
       kept.meets.resize(kept.size());
@@ -471,46 +746,15 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     const KeptTriangles& kept = s.kept;
     const std::size_t m = kept.size();
     probes += m;
-    // The vertex's ball against each triangle's box (tighter than a cube of half-side r at the
-    // box's edges and corners) and the two extents along the sensor axis, without a branch per
-    // test (about one triangle in ten passes; branches mispredicted), then the exact tests on the
-    // triangles that pass.
-    const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
     const double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
     const double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
-    const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
-    const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
-    const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
+    // Pass 1 marks the triangles that pass, pass 2 gathers them (none: the next vertex).
+    const bool any = self ? markMeets<true>(kept, vr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, s.kept.meets.data())
+                          : markMeets<false>(kept, vr, n_lo, n_hi, Vec3::Zero(), 0.0, s.kept.meets.data());
+    if (!any) continue;
     const Index* record = kept.record.data();
+    const unsigned char* meets = s.kept.meets.data();
     Index* hits = s.hits.data();
-    // Pass 1 marks the triangles that pass, pass 2 gathers them: a running count inside the
-    // vector loop would chain every iteration to the one before (measured slower).
-    unsigned char* meets = s.kept.meets.data();
-    std::size_t j = 0;
-#if defined(__SSE2__)
-    // Two triangles per instruction (SSE2 is part of x86-64); the same tests as the loop below.
-    {
-      const __m128d vx = _mm_set1_pd(x), vy = _mm_set1_pd(y), vz = _mm_set1_pd(z), vr2 = _mm_set1_pd(r2);
-      const __m128d vnl = _mm_set1_pd(n_lo), vnh = _mm_set1_pd(n_hi), zero = _mm_setzero_pd();
-      for (; j + 2 <= m; j += 2) {
-        const __m128d dx = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(lx + j), vx), _mm_sub_pd(vx, _mm_loadu_pd(hx + j))));
-        const __m128d dy = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(ly + j), vy), _mm_sub_pd(vy, _mm_loadu_pd(hy + j))));
-        const __m128d dz = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(lz + j), vz), _mm_sub_pd(vz, _mm_loadu_pd(hz + j))));
-        const __m128d d2 = _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy)), _mm_mul_pd(dz, dz));
-        const __m128d ok = _mm_and_pd(_mm_cmple_pd(d2, vr2), _mm_and_pd(_mm_cmpge_pd(vnh, _mm_loadu_pd(tnl + j)),
-                                                                        _mm_cmple_pd(vnl, _mm_loadu_pd(tnh + j))));
-        const int mask = _mm_movemask_pd(ok);
-        meets[j] = static_cast<unsigned char>(mask & 1);
-        meets[j + 1] = static_cast<unsigned char>(mask >> 1);
-      }
-    }
-#endif
-    for (; j < m; ++j) {
-      const double dx = std::max(0.0, std::max(lx[j] - x, x - hx[j]));
-      const double dy = std::max(0.0, std::max(ly[j] - y, y - hy[j]));
-      const double dz = std::max(0.0, std::max(lz[j] - z, z - hz[j]));
-      meets[j] = dx * dx + dy * dy + dz * dz <= r2 && n_hi >= tnl[j] && n_lo <= tnh[j];
-    }
     std::size_t n_hits = 0;
     for (std::size_t k = 0; k < m; ++k) {
       hits[n_hits] = record[k];
@@ -519,15 +763,17 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     for (std::size_t h = 0; h < n_hits; ++h) {
       const Index k = hits[h];
       const TriangleCorners& tc = s.corners[k];
+      // Self pairs: the exclusion rule first, since most pairs of one body that the boxes keep are
+      // neighbours at rest.
+      if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, ctx.tb.chunks.triangle(ct.chunk, tc.k))) {
+        ++ctx.counters.self_excluded_pairs;
+        continue;
+      }
       // With the radius bound the exact distance decides: a pair that is not within the vertex's
       // radius now is no candidate (the swept bound keeps what the boxes keep: its pairs may meet
       // during the step).
       if (!ctx.swept && !(pointTriangleDistance2(vr.x, tc.a, tc.b, tc.c) < vr.reach2)) {
         ++ctx.counters.candidates_beyond_reach;
-        continue;
-      }
-      if (ctx.self_exclude2 >= 0.0 && excludedSelfPair(ctx, vr.v, ctx.tb.chunks.triangle(ct.chunk, tc.k))) {
-        ++ctx.counters.self_excluded_pairs;
         continue;
       }
       ctx.out.push_back((std::uint64_t{vr.v} << 32) | tc.t);
@@ -536,115 +782,52 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
   ctx.counters.candidate_probes += probes;
 }
 
-/// [beyond] The rest-shape bound of self-collision. Each region r of a body gets a rigid motion
-/// T_r(p) = c_r + R_r (p − ĉ_r) that carries its rest shape close to where it is now (ĉ_r, c_r the
-/// rest and current centroids of its vertices, R_r the rotation of the polar decomposition of
-/// their cross-covariance), and each chunk c the largest deviation dev_c = |x_u − T_r(rest_u)|
-/// over the vertices its triangles use (its table). A rigid motion keeps distances, so for a
-/// vertex v of chunk a and a triangle t of chunk b carried by one motion T,
-///   dist_now(v, t) ≥ dist_rest(v, t) − dev_a(T) − dev_b(T),
-/// and a pair the exclusion rule leaves in was at least E = self_rest_exclusion × R apart at
-/// rest. So when E − dev_a − dev_b reaches beyond every vertex's reach, no pair of (a, b) can be a
-/// candidate: the surface there has not bent enough since rest to touch itself. A flat cloth or a
-/// ball that keeps its shape costs two passes over its vertices, not its box tests. Any rigid
-/// motion gives a valid bound; the fit only makes it tight. Chunks of two regions use a's motion
-/// for both: dev_b(T_a) ≤ dev_b + |T_b(q_b) − T_a(q_b)| + ‖R_b − R_a‖_F ρ_b over b's rest
-/// sphere (centre q_b, radius ρ_b).
-class RestFit {
- public:
-  void fit(const Body& X) {
-    const std::size_t regions = X.regionCount(), chunks = X.chunks.count();
-    const std::vector<Vec3>& rest = X.rest;
-    motion_.resize(regions);
-    for (Index r = 0; r < regions; ++r) {
-      Vec3 sx = Vec3::Zero(), sr = Vec3::Zero();
-      Eigen::Matrix3d xr = Eigen::Matrix3d::Zero();
-      double n = 0.0;
-      for (Index c = X.chunks.region_begin[r]; c < X.chunks.region_begin[r + 1]; ++c)
-        for (Index v : X.chunks.vertices(c)) {
-          const Vec3 x = X.positions[v];
-          sx += x;
-          sr += rest[v];
-          xr.noalias() += x * rest[v].transpose();
-          n += 1.0;
-        }
-      Motion& m = motion_[r];
-      if (n == 0.0) {
-        m = Motion{};
-        continue;
-      }
-      m.c = sx / n;
-      m.rc = sr / n;
-      // Σ (x − c)(rest − ĉ)ᵀ = Σ x restᵀ − n c ĉᵀ; its polar factor is the best rotation.
-      const Eigen::Matrix3d cov = xr - n * m.c * m.rc.transpose();
-      const Eigen::JacobiSVD<Eigen::Matrix3d> svd(cov, Eigen::ComputeFullU | Eigen::ComputeFullV);
-      Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
-      if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0) d(2, 2) = -1.0;
-      m.rot = svd.matrixU() * d * svd.matrixV().transpose();
-      m.offset = m.c - m.rot * m.rc;
-    }
-    dev_.resize(chunks);
-    rest_center_.resize(chunks);
-    rest_radius_.resize(chunks);
-    region_dev_.assign(regions, 0.0);
-    region_lo_.assign(regions, Vec3::Constant(std::numeric_limits<double>::infinity()));
-    region_hi_.assign(regions, Vec3::Constant(-std::numeric_limits<double>::infinity()));
-    const std::vector<Index>& table = X.chunks.table;
-    for (Index c = 0; c < chunks; ++c) {
-      const Motion& m = motion_[X.chunks.region_of[c]];
-      double dev2 = 0.0;
-      Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-      for (Index at = X.chunks.table_begin[c]; at < X.chunks.table_begin[c + 1]; ++at) {
-        const Index u = table[at];
-        const Vec3& p = rest[u];
-        dev2 = std::max(dev2, (X.positions[u] - m.offset - m.rot * p).squaredNorm());
-        lo = lo.cwiseMin(p);
-        hi = hi.cwiseMax(p);
-      }
-      dev_[c] = std::sqrt(dev2);
-      rest_center_[c] = 0.5 * (lo + hi);
-      rest_radius_[c] = 0.5 * (hi - lo).norm();
-      const Index r = X.chunks.region_of[c];
-      region_dev_[r] = std::max(region_dev_[r], dev_[c]);
-      region_lo_[r] = region_lo_[r].cwiseMin(lo);
-      region_hi_[r] = region_hi_[r].cwiseMax(hi);
-    }
-  }
+/// [beyond] The rest-shape bound of self-collision. A rigid motion T keeps distances, so for a
+/// vertex v of chunk a and a triangle t of chunk b of one body,
+///   dist_now(v, t) ≥ dist_rest(v, t) − dev_a(T) − dev_b(T),   dev_c(T) = max |x_u − T(rest_u)|
+/// over c's vertex table, and a pair the exclusion rule leaves in was at least E =
+/// self_rest_exclusion × R apart at rest. So when E − dev_a − dev_b reaches beyond every vertex's
+/// reach, no pair of (a, b) can be a candidate: the surface there has not bent enough since rest
+/// to touch itself. A flat cloth or a ball that keeps its shape costs what the refit's pass adds,
+/// not its box tests. The refit leaves per chunk the y-box of y = x − R_r·rest (R_r its region's
+/// rotation, RestFit in body.h); with T = R_a · + k_a, k_a the centre of a's y-box,
+///   dev_a(T) ≤ h_a (the y-box's half diagonal),
+///   dev_b(T) ≤ h_b + |k_b − k_a|                                  (b in a's region),
+///   dev_b(T) ≤ h_b + ‖R_b − R_a‖_F ρ_b + |(R_b − R_a) q_b + k_b − k_a|  (otherwise; q_b, ρ_b the
+///   rest sphere of b's table).
+/// Regions are bounded the same way with their union y-boxes and rest spheres.
+double restDeviation(const RestFit& f, Index ra, const Vec3& ka, double ha, Index rb, const Vec3& kb, double hb,
+                     const Vec3& qb, double rho_b) {
+  if (ra == rb) return ha + hb + (kb - ka).norm();
+  const Eigen::Matrix3d d = f.rot[rb] - f.rot[ra];
+  return ha + hb + d.norm() * rho_b + (d * qb + kb - ka).norm();
+}
 
-  /// Whether no (vertex of chunk a, triangle of chunk b) pair can be a candidate: the bound above
-  /// clears `reach`, the largest reach of a's vertices (exclusion: E).
-  bool apart(const Body& X, Index a, Index b, double exclusion, double reach) const {
-    return clears(X.chunks.region_of[a], dev_[a], X.chunks.region_of[b], dev_[b], rest_center_[b], rest_radius_[b],
-                  exclusion, reach);
-  }
-  /// The same for every pair between regions i and j (both directions; `reach` the larger of the two).
-  bool apartRegions(Index i, Index j, double exclusion, double reach) const {
-    const Vec3 center = 0.5 * (region_lo_[j] + region_hi_[j]);
-    return clears(i, region_dev_[i], j, region_dev_[j], center, 0.5 * (region_hi_[j] - region_lo_[j]).norm(), exclusion,
-                  reach);
-  }
+/// The bound clears `reach` (the largest reach of the vertices on either side). It is computed in
+/// double from the same positions the distances are: a relative 1e-9 keeps its own rounding on
+/// the safe side.
+bool restClears(double exclusion, double deviation, double reach) {
+  return exclusion - deviation >= reach * (1.0 + 1e-9);
+}
 
- private:
-  /// E − dev_a − dev_b(T_ra) ≥ reach, with b (in region rb) measured against a's region's motion.
-  bool clears(Index ra, double dev_a, Index rb, double dev_b, const Vec3& center_b, double radius_b, double exclusion,
-              double reach) const {
-    if (ra != rb) {
-      const Motion &ma = motion_[ra], &mb = motion_[rb];
-      dev_b += (mb.offset - ma.offset + (mb.rot - ma.rot) * center_b).norm() + (mb.rot - ma.rot).norm() * radius_b;
-    }
-    // The bound is computed in double from the same positions the distances are: a relative 1e-9
-    // keeps its own rounding on the safe side.
-    return exclusion - dev_a - dev_b >= reach * (1.0 + 1e-9);
-  }
+/// No (vertex of chunk a, triangle of chunk b) pair of X can be a candidate.
+bool restApartChunks(const Body& X, Index a, Index b, double exclusion, double reach) {
+  const RestFit& f = X.rest_fit;
+  const std::vector<Index>& region_of = X.chunks.region_of;
+  return restClears(exclusion,
+                    restDeviation(f, region_of[a], f.chunk_center[a], f.chunk_half[a], region_of[b], f.chunk_center[b],
+                                  f.chunk_half[b], f.chunk_rest_center[b], f.chunk_rest_radius[b]),
+                    reach);
+}
 
-  struct Motion {
-    Vec3 c = Vec3::Zero(), rc = Vec3::Zero(), offset = Vec3::Zero();
-    Eigen::Matrix3d rot = Eigen::Matrix3d::Identity();
-  };
-  std::vector<Motion> motion_;
-  std::vector<double> dev_, rest_radius_, region_dev_;
-  std::vector<Vec3> rest_center_, region_lo_, region_hi_;
-};
+/// No pair between regions i and j of X (both directions) can be a candidate.
+bool restApartRegions(const Body& X, Index i, Index j, double exclusion, double reach) {
+  const RestFit& f = X.rest_fit;
+  return restClears(exclusion,
+                    restDeviation(f, i, f.region_center[i], f.region_half[i], j, f.region_center[j], f.region_half[j],
+                                  f.region_rest_center[j], f.region_rest_radius[j]),
+                    reach);
+}
 
 struct Group {
   BodyId vb, tb;
@@ -715,16 +898,15 @@ class Collector {
     const PairContext ctx{X, X, radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude};
     const auto t0 = std::chrono::steady_clock::now();
     // The rest-shape bound needs the radius bound's reach (a swept pair may meet during the step).
-    const bool rest_bound = params_.self_rest_bound && !params_.swept;
+    const bool rest_bound = params_.self_rest_bound && !params_.swept && X.rest_fit.filled;
     // The largest reach of the vertices in box b (reachOf of the largest radius and coordinate).
     const auto reachIn = [&](const MotionBox& b) {
       return (radius + mf * b.motion) * (1.0 + 1e-5) + 1e-6 * std::max(b.lo.cwiseAbs().maxCoeff(), b.hi.cwiseAbs().maxCoeff());
     };
-    if (rest_bound) rest_fit_.fit(X);
     for (const auto& [ri, rj] : region_pairs_) {
       ++counters_.self_region_pairs;
       if (rest_bound &&
-          rest_fit_.apartRegions(ri, rj, exclude, std::max(reachIn(X.region_box[ri]), reachIn(X.region_box[rj])))) {
+          restApartRegions(X, ri, rj, exclude, std::max(reachIn(X.region_box[ri]), reachIn(X.region_box[rj])))) {
         ++counters_.self_region_pairs_unbent;
         continue;
       }
@@ -761,7 +943,7 @@ class Collector {
         ChunkRef& ca = s_.near_a[ka];
         ChunkRef& cb = other[kb];
         const auto collect = [&](ChunkRef& cv, ChunkRef& ct) {
-          if (rest_bound && rest_fit_.apart(X, cv.chunk, ct.chunk, exclude, reachIn(X.chunk_box[cv.chunk]))) {
+          if (rest_bound && restApartChunks(X, cv.chunk, ct.chunk, exclude, reachIn(X.chunk_box[cv.chunk]))) {
             ++counters_.self_chunk_pairs_unbent;
             return;
           }
@@ -890,7 +1072,6 @@ class Collector {
   Scratch s_;
   std::vector<std::pair<Index, Index>> region_pairs_, chunk_pairs_;
   std::vector<Grown> self_boxes_;
-  RestFit rest_fit_;
 };
 
 }  // namespace

@@ -23,7 +23,9 @@ namespace psc::detail {
 /// Refits b's chunk, region and body boxes; throws psc::Error naming the first non-finite vertex.
 /// With `measure`, also fills b.shape (region areas and the longest edge) in the same pass.
 /// `swept` (MotionBound::Swept): the boxes hold the previous positions too and no motion term.
-void refitBounds(Body& b, bool measure, bool swept);
+/// With `rest_fit` (a self-colliding body, MotionBound::Radius), the same pass fills b.rest_fit,
+/// the rest-shape bound of the self-collision cull.
+void refitBounds(Body& b, bool measure, bool swept, bool rest_fit = false);
 
 struct CullParams {
   double motion_factor = 2.0;  ///< MotionBound::Radius; 0 with `swept`

@@ -89,6 +89,12 @@ struct SensorWorld::Impl {
   void partitionBody(Body& b, std::size_t count);
   void preparePartitions(StepStats& stats);
   void refitAndCheck(Body& b, StepStats& stats);
+  /// Whether the refit carries b's rest-shape bound: what the self-collision cull reads with
+  /// MotionBound::Radius in the default midphase.
+  bool restFitOn(const Body& b) const {
+    return b.selfCollides() && settings.self_rest_bound && settings.motion_bound == MotionBound::Radius &&
+           settings.flagging != Flagging::Sensors;
+  }
   void moveParticles(StepStats& stats, double r_eff);
   const std::vector<Index>& ringOf(std::size_t particle, const Body& b, Index region, Index v);
 };
@@ -105,8 +111,9 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
   b.mean_edge = edgeStats(topology, b.positions).mean;
   b.chunks = detail::buildChunks(topology, b.positions, b.partition.region_of, b.partition.regionCount(),
                                  settings.chunk_vertices);
+  b.rest_fit.built = false;
   // The repartition check compares with what the same refit measures now (A* and the longest edge).
-  detail::refitBounds(b, true, settings.motion_bound == MotionBound::Swept);
+  detail::refitBounds(b, true, settings.motion_bound == MotionBound::Swept, restFitOn(b));
   b.max_edge = b.shape.max_edge;
   const std::vector<double> areas =
       settings.repartition.estimator == AreaEstimator::TrueArea
@@ -156,7 +163,7 @@ void SensorWorld::Impl::refitAndCheck(Body& b, StepStats& stats) {
   const bool check = rs.enabled && b.deformable && ++b.steps_since_check >= rs.check_every;
   // The check's area and edge figures come out of the refit's pass over the vertices.
   auto t = Clock::now();
-  detail::refitBounds(b, check, settings.motion_bound == MotionBound::Swept);
+  detail::refitBounds(b, check, settings.motion_bound == MotionBound::Swept, restFitOn(b));
   stats.ms_refit += msSince(t);
   if (!check) return;
   t = Clock::now();
@@ -342,6 +349,7 @@ std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
   b->parts = desc.parts;
   if (desc.self_collision) {
     b->rest = restShape(desc.positions);
+    b->rest_fit.built = false;
     b->rest_mean_edge = edgeStats(*b->topology, desc.positions).mean;
   }
   return b;
@@ -405,6 +413,7 @@ void SensorWorld::setSelfCollision(BodyId id, bool on) {
   if (on) checkSelfCollisionMode(impl_->settings, b.label());
   if (on) checkFinite(b.positions, b.label());
   b.rest = on ? restShape(b.positions) : std::vector<Vec3>{};
+  b.rest_fit = detail::RestFit{};
   b.rest_mean_edge = on ? edgeStats(b.fullTopology(), b.positions).mean : 0.0;
 }
 
@@ -561,7 +570,7 @@ std::size_t SensorWorld::memoryBytes(BodyId id) const {
          b.partition.code_vectors.capacity() * sizeof(b.partition.code_vectors[0]) +
          b.particle_vertex.capacity() * sizeof(Index) + b.chunks.bytes() +
          (b.chunk_box.capacity() + b.region_box.capacity()) * sizeof(detail::MotionBox) +
-         b.rest.capacity() * sizeof(Vec3);
+         b.rest.capacity() * sizeof(Vec3) + b.rest_fit.bytes();
 }
 
 const MeshReport& SensorWorld::report(BodyId id) const { return impl_->get(id).report; }

@@ -95,7 +95,7 @@ struct StepStats {
   std::size_t candidate_pairs = 0;         ///< unique pairs handed to the exact test
   std::size_t self_region_pairs = 0;       ///< region pairs of one body (self-collision) whose grown boxes overlap
   std::size_t self_candidate_pairs = 0;    ///< of candidate_pairs: a body with itself
-  std::size_t self_excluded_pairs = 0;     ///< self pairs the boxes kept but the rule drops (incident, close at rest, or out of reach)
+  std::size_t self_excluded_pairs = 0;     ///< self pairs the boxes kept but the exclusion rule drops (incident, or close at rest), past the rest-centroid pre-test (a triangle whose rest centroid is within the exclusion distance is dropped with the box test, uncounted)
   std::size_t self_region_pairs_unbent = 0; ///< of self_region_pairs: ruled out whole by the rest-shape bound
   std::size_t self_chunk_pairs_unbent = 0;  ///< (vertex chunk, triangle chunk) pairs of one body the rest-shape bound ruled out
   std::size_t repartitions = 0;            ///< bodies re-partitioned this step
