@@ -223,29 +223,6 @@ void startRestFit(Body& b) {
   f.region_xr.assign(regions, Eigen::Matrix3d::Zero());
 }
 
-/// The rotation R that maximises tr(Rᵀ A), i.e. the rotation of A's polar decomposition, by the
-/// iteration of Müller et al. 2016 ("A robust method to extract the rotational part of
-/// deformations") started from `start`: each round turns R by the axis-angle Σ rᵢ × aᵢ / |Σ rᵢ·aᵢ|
-/// of its columns and A's. Any rotation keeps the bound sound; the iteration only makes it tight,
-/// and from last step's rotation it converges in a few rounds. The result is re-orthonormalised
-/// through a unit quaternion so that rounding does not build up from step to step.
-Eigen::Matrix3d rotationOf(const Eigen::Matrix3d& a, const Eigen::Matrix3d& start) {
-  Eigen::Matrix3d rot = start;
-  const double scale = a.norm();
-  if (!(scale > 0.0) || !std::isfinite(scale)) return start;
-  for (int round = 0; round < 20; ++round) {
-    const Vec3 torque = rot.col(0).cross(a.col(0)) + rot.col(1).cross(a.col(1)) + rot.col(2).cross(a.col(2));
-    const double align = std::abs(rot.col(0).dot(a.col(0)) + rot.col(1).dot(a.col(1)) + rot.col(2).dot(a.col(2)));
-    const Vec3 omega = torque / (align + 1e-9 * scale);
-    const double angle = omega.norm();
-    if (!(angle > 1e-9)) break;
-    rot = Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix() * rot;
-  }
-  Eigen::Quaterniond q(rot);
-  q.normalize();
-  return q.toRotationMatrix();
-}
-
 /// After the pass: each region's fit (the rotation that best carries its rest shape onto its
 /// vertices now), each chunk's and region's y-box as centre and half diagonal, and the rotation
 /// the next pass starts from: this fit turned once more by its turn since the last fit (a body
@@ -278,7 +255,7 @@ void finishRestFit(Body& b) {
     if (n > 0.0) {
       // Σ (x − c)(rest − ĉ)ᵀ = Σ x restᵀ − n c ĉᵀ.
       const Vec3 c = f.region_sum_x[r] / n;
-      const Eigen::Matrix3d fit = rotationOf(f.region_xr[r] - n * c * f.region_rest_mean[r].transpose(), f.rot[r]);
+      const Eigen::Matrix3d fit = bestRotation(f.region_xr[r] - n * c * f.region_rest_mean[r].transpose(), f.rot[r]);
       if ((fit - f.rot[r]).norm() * f.region_rest_radius[r] > tolerance) {
         f.rot[r] = fit;
         for (Index k = ch.region_begin[r]; k < ch.region_begin[r + 1]; ++k) {

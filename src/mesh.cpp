@@ -2,6 +2,8 @@
 
 #include "psc/error.h"
 
+#include <Eigen/SVD>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -262,6 +264,31 @@ Bounds bounds(const PositionView& positions) {
   for (std::size_t i = 0; i < positions.size(); ++i) r2 = std::max(r2, (positions[i] - c).squaredNorm());
   b.radius = std::sqrt(r2);
   return b;
+}
+
+Eigen::Matrix3d bestRotation(const Eigen::Matrix3d& a, const Eigen::Matrix3d& start) {
+  const double scale = a.norm();
+  if (!(scale > 0.0) || !std::isfinite(scale)) return start;
+  Eigen::Matrix3d rot = start;
+  bool converged = false;
+  for (int round = 0; round < 12 && !converged; ++round) {
+    const Vec3 torque = rot.col(0).cross(a.col(0)) + rot.col(1).cross(a.col(1)) + rot.col(2).cross(a.col(2));
+    const double align = std::abs(rot.col(0).dot(a.col(0)) + rot.col(1).dot(a.col(1)) + rot.col(2).dot(a.col(2)));
+    const Vec3 omega = torque / (align + 1e-9 * scale);
+    const double angle = omega.norm();
+    converged = !(angle > 1e-7);
+    if (!converged) rot = Eigen::AngleAxisd(angle, omega / angle).toRotationMatrix() * rot;
+  }
+  if (!converged) {
+    // Far from the start, or a strongly stretched or reflected A, where the iteration crawls.
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(a, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+    if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0) d(2, 2) = -1.0;
+    rot = svd.matrixU() * d * svd.matrixV().transpose();
+  }
+  Eigen::Quaterniond q(rot);
+  q.normalize();
+  return q.toRotationMatrix();
 }
 
 }  // namespace psc

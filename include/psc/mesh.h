@@ -138,4 +138,15 @@ struct Bounds {
 };
 Bounds bounds(const PositionView& positions);
 
+/// The rotation R (orthonormal, det +1) that maximises tr(Rᵀ A): for A = Σ (x − c)(p − ĉ)ᵀ, the
+/// rotation that best carries points p (centroid ĉ) onto x (centroid c), the rotation factor of
+/// A's polar decomposition. Found by the iteration of Müller et al. 2016 ("A robust method to
+/// extract the rotational part of deformations") from `start` (a rotation): each round turns R by
+/// the axis-angle Σ rᵢ × aᵢ / |Σ rᵢ·aᵢ| of its columns rᵢ and A's aᵢ, until a turn is below 1e-7;
+/// from a nearby rotation (last step's) that takes a few rounds. Where it has not converged in 12
+/// (a far start, a strongly stretched or reflected A) the answer comes from an SVD. The result goes
+/// through a unit quaternion, so that rounding does not build up when it is fed back as the next
+/// start. A zero or non-finite A gives `start` back.
+Eigen::Matrix3d bestRotation(const Eigen::Matrix3d& a, const Eigen::Matrix3d& start = Eigen::Matrix3d::Identity());
+
 }  // namespace psc

@@ -6,7 +6,10 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/SVD>
+
 #include <limits>
+#include <random>
 #include <set>
 
 namespace psc {
@@ -116,6 +119,65 @@ TEST(MeshReport, DegenerateDuplicateIsolatedNonManifoldWinding) {
   std::swap(s.triangles[0][1], s.triangles[0][2]);
   MeshTopology st(s.triangles, s.vertices.size());
   EXPECT_EQ(validate(st, PositionView::of(s.vertices)).inconsistent_winding_edges, 3u);
+}
+
+
+/// The reference: the rotation factor of A's polar decomposition by SVD, U diag(1, 1, ±1) Vᵀ
+/// with the sign that makes it a proper rotation.
+Eigen::Matrix3d polarRotationBySvd(const Eigen::Matrix3d& a) {
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(a, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+  if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0) d(2, 2) = -1.0;
+  return svd.matrixU() * d * svd.matrixV().transpose();
+}
+
+Eigen::Matrix3d randomRotation(std::mt19937& rng) {
+  std::normal_distribution<double> g;
+  Eigen::Quaterniond q(g(rng), g(rng), g(rng), g(rng));
+  q.normalize();
+  return q.toRotationMatrix();
+}
+
+TEST(BestRotation, IsThePolarFactorOfRotatedStretches) {
+  // A = R S with S symmetric positive definite (a rotated stretch: what a region's fit sees):
+  // the answer is R, from the identity and from any start.
+  std::mt19937 rng(20261123);
+  std::uniform_real_distribution<double> stretch(0.3, 3.0);
+  for (int trial = 0; trial < 500; ++trial) {
+    const Eigen::Matrix3d rot = randomRotation(rng), axes = randomRotation(rng);
+    const Eigen::Matrix3d s =
+        axes * Eigen::Vector3d(stretch(rng), stretch(rng), stretch(rng)).asDiagonal() * axes.transpose();
+    const Eigen::Matrix3d a = 7.0 * rot * s;
+    for (const Eigen::Matrix3d& start : {Eigen::Matrix3d(Eigen::Matrix3d::Identity()), randomRotation(rng)}) {
+      const Eigen::Matrix3d got = bestRotation(a, start);
+      EXPECT_LT((got - rot).norm(), 1e-6) << "trial " << trial;
+      EXPECT_LT((got.transpose() * got - Eigen::Matrix3d::Identity()).norm(), 1e-14);
+      EXPECT_NEAR(got.determinant(), 1.0, 1e-14);
+    }
+  }
+}
+
+TEST(BestRotation, ReachesTheSvdOptimumOnGeneralAndFlatMatrices) {
+  // Any A, reflections and rank 2 (a flat region) included: tr(Rᵀ A) as large as the SVD's.
+  std::mt19937 rng(7);
+  std::normal_distribution<double> g;
+  for (int trial = 0; trial < 500; ++trial) {
+    Eigen::Matrix3d a;
+    for (int k = 0; k < 9; ++k) a(k / 3, k % 3) = g(rng);
+    if (trial % 3 == 1) a.col(2) = 0.5 * a.col(0) - 2.0 * a.col(1);  // rank 2
+    const Eigen::Matrix3d ref = polarRotationBySvd(a);
+    const Eigen::Matrix3d got = bestRotation(a, trial % 2 == 0 ? Eigen::Matrix3d(Eigen::Matrix3d::Identity()) : randomRotation(rng));
+    EXPECT_NEAR((got.transpose() * a).trace(), (ref.transpose() * a).trace(), 1e-9 * a.norm()) << "trial " << trial;
+    EXPECT_NEAR(got.determinant(), 1.0, 1e-14);
+  }
+}
+
+TEST(BestRotation, GivesTheStartBackForZeroOrNonFiniteInput) {
+  const Eigen::Matrix3d start = Eigen::AngleAxisd(0.4, Vec3(0, 0, 1)).toRotationMatrix();
+  EXPECT_EQ(bestRotation(Eigen::Matrix3d::Zero(), start), start);
+  Eigen::Matrix3d nan = Eigen::Matrix3d::Identity();
+  nan(1, 2) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(bestRotation(nan, start), start);
 }
 
 }  // namespace
