@@ -20,6 +20,7 @@
 #include <cmath>
 #include <fstream>
 #include <functional>
+#include <iostream>
 #include <limits>
 #include <map>
 #include <memory>
@@ -314,6 +315,8 @@ class Run {
   std::unique_ptr<FrameSeries> frames_;
   double far_out_ = 1.0;             ///< far enough out to mean the simulation blew up
   StepRecord* current_ = nullptr;    ///< the record of the step under way
+  std::size_t steps_begun_ = 0;      ///< steps begun in this run (warm-up included)
+  bool runaway_told_ = false;        ///< the first runaway was written to stderr as it happened
   Clock::time_point detect_start_;
   std::size_t joints_before_detect_ = 0;  ///< cluster contacts of the last self pass, not yet solved
 };
@@ -381,6 +384,7 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
 
 void Run::step(StepRecord& rec) {
   current_ = &rec;
+  ++steps_begun_;
   const auto c0 = Clock::now();
   copyPositions(world_, before_);
   rec.ms.crossings = msSince(c0);
@@ -403,6 +407,14 @@ void Run::afterCollision() {
   collectFound(world_, found_, found_self_);
   current_->n.contacts_found = found_.size();
   current_->n.runaway_pairs = runawayPairs(world_, found_, current_->runaway);
+  if (current_->n.runaway_pairs > 0 && !runaway_told_) {
+    // Told as it happens, not only in the run's summary: a runaway's contacts can fill the memory
+    // long before the run ends.
+    runaway_told_ = true;
+    std::cerr << "psc_demo: RUNAWAY in " << scene_.name << " (" << runName(pipeline_, opt_.bullet_clusters, opt_.cluster_self_direct)
+              << ") at step " << steps_begun_ << ": " << current_->runaway
+              << "; the run goes on (docs/BENCHMARK.md, \"Runaways\")" << std::endl;
+  }
   if (pipeline_ == Pipeline::Bullet) current_->n.exact_tests = countVFExactTests(world_.world());
   if (opt_.truth != TruthMode::None) compareWithTruth(*current_);
 }

@@ -625,26 +625,29 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   ctx.counters.candidate_triangles += ch.triangleCount(c.chunk);
 }
 
-/// meets[j] = 1 for each kept triangle j whose box the vertex's ball meets and whose extent along
-/// the sensor axis meets the vertex's [n_lo, n_hi], without a branch per test (about one triangle
-/// in ten passes; branches mispredicted). Pass 1 marks the triangles that pass, the caller gathers
-/// them: a running count inside the vector loop would chain every iteration to the one before
-/// (measured slower). With kSelf, a triangle whose rest centroid lies within the exclusion distance
-/// of the vertex's rest position does not pass: the triangle was at least as close, so the rule
-/// excludes the pair, and most self pairs the boxes keep are such neighbours.
+/// The kept triangles whose box the vertex's ball meets and whose extent along the sensor axis
+/// meets the vertex's [n_lo, n_hi], into `hits` (their records, in kept order); returns how many.
+/// Two triangles per instruction without a branch per test: about one triangle in ten passes
+/// between two bodies, and a branch on each would be mispredicted, so pass 1 marks (`meets`) and
+/// pass 2 gathers (a running count inside the vector loop would chain every iteration to the one
+/// before: measured slower). With kSelf a triangle whose rest centroid lies within the exclusion
+/// distance of the vertex's rest position does not pass either (the triangle was at least as close,
+/// so the rule excludes the pair). Most self pairs the boxes keep are such neighbours, so passes
+/// are rare there and the loop gathers at once behind a branch that is almost never taken.
 template <bool kSelf>
-bool markMeets(const KeptTriangles& kept, const VertexRec& vr, double n_lo, double n_hi, const Vec3& rest,
-               double exclude2, unsigned char* meets) {
+std::size_t collectMeets(const KeptTriangles& kept, const VertexRec& vr, double n_lo, double n_hi, const Vec3& rest,
+                         double exclude2, unsigned char* meets, Index* hits) {
   const std::size_t m = kept.size();
+  const Index* record = kept.record.data();
   const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
   const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
   const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
   const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
   const double *gx = kept.mid_x.data(), *gy = kept.mid_y.data(), *gz = kept.mid_z.data();
-  std::size_t j = 0;
+  std::size_t j = 0, n_hits = 0;
   int any = 0;
 #if defined(__SSE2__)
-  // Two triangles per instruction (SSE2 is part of x86-64); the same tests as the loop below.
+  // SSE2 is part of x86-64; the same tests as the loop below.
   {
     const __m128d vx = _mm_set1_pd(x), vy = _mm_set1_pd(y), vz = _mm_set1_pd(z), vr2 = _mm_set1_pd(r2);
     const __m128d vnl = _mm_set1_pd(n_lo), vnh = _mm_set1_pd(n_hi), zero = _mm_setzero_pd();
@@ -662,11 +665,17 @@ bool markMeets(const KeptTriangles& kept, const VertexRec& vr, double n_lo, doub
         const __m128d ez = _mm_sub_pd(_mm_loadu_pd(gz + j), pz);
         const __m128d g2 = _mm_add_pd(_mm_add_pd(_mm_mul_pd(ex, ex), _mm_mul_pd(ey, ey)), _mm_mul_pd(ez, ez));
         ok = _mm_and_pd(ok, _mm_cmpge_pd(g2, e2));
+        const int mask = _mm_movemask_pd(ok);
+        if (mask != 0) {
+          if (mask & 1) hits[n_hits++] = record[j];
+          if (mask & 2) hits[n_hits++] = record[j + 1];
+        }
+      } else {
+        const int mask = _mm_movemask_pd(ok);
+        any |= mask;
+        meets[j] = static_cast<unsigned char>(mask & 1);
+        meets[j + 1] = static_cast<unsigned char>(mask >> 1);
       }
-      const int mask = _mm_movemask_pd(ok);
-      any |= mask;
-      meets[j] = static_cast<unsigned char>(mask & 1);
-      meets[j + 1] = static_cast<unsigned char>(mask >> 1);
     }
   }
 #endif
@@ -675,11 +684,21 @@ bool markMeets(const KeptTriangles& kept, const VertexRec& vr, double n_lo, doub
     const double dy = std::max(0.0, std::max(ly[j] - y, y - hy[j]));
     const double dz = std::max(0.0, std::max(lz[j] - z, z - hz[j]));
     bool ok = dx * dx + dy * dy + dz * dz <= r2 && n_hi >= tnl[j] && n_lo <= tnh[j];
-    if constexpr (kSelf) ok = ok && (Vec3(gx[j], gy[j], gz[j]) - rest).squaredNorm() >= exclude2;
-    any |= static_cast<int>(ok);
-    meets[j] = ok;
+    if constexpr (kSelf) {
+      if (ok && (Vec3(gx[j], gy[j], gz[j]) - rest).squaredNorm() >= exclude2) hits[n_hits++] = record[j];
+    } else {
+      any |= static_cast<int>(ok);
+      meets[j] = ok;
+    }
   }
-  return any != 0;
+  if constexpr (!kSelf) {
+    if (any == 0) return 0;
+    for (std::size_t k = 0; k < m; ++k) {
+      hits[n_hits] = record[k];
+      n_hits += meets[k];
+    }
+  }
+  return n_hits;
 }
 
 // Vertices of chunk cv (of ctx.vb) against the triangles owned by chunk ct (of ctx.tb).
@@ -725,18 +744,10 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     probes += m;
     const double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
     const double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
-    // Pass 1 marks the triangles that pass, pass 2 gathers them (none: the next vertex).
-    const bool any = self ? markMeets<true>(kept, vr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, s.kept.meets.data())
-                          : markMeets<false>(kept, vr, n_lo, n_hi, Vec3::Zero(), 0.0, s.kept.meets.data());
-    if (!any) continue;
-    const Index* record = kept.record.data();
-    const unsigned char* meets = s.kept.meets.data();
     Index* hits = s.hits.data();
-    std::size_t n_hits = 0;
-    for (std::size_t k = 0; k < m; ++k) {
-      hits[n_hits] = record[k];
-      n_hits += meets[k];
-    }
+    const std::size_t n_hits =
+        self ? collectMeets<true>(kept, vr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, s.kept.meets.data(), hits)
+             : collectMeets<false>(kept, vr, n_lo, n_hi, Vec3::Zero(), 0.0, s.kept.meets.data(), hits);
     for (std::size_t h = 0; h < n_hits; ++h) {
       const Index k = hits[h];
       const TriangleCorners& tc = s.corners[k];

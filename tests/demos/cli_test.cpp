@@ -193,6 +193,20 @@ TEST(DemoCli, SelfCollisionRunsHaveTheSelfKeys) {
   EXPECT_NE(header.find(",self_recall_strict,"), std::string::npos) << header;
 }
 
+TEST(DemoCli, ARunawayIsToldAsItHappens) {
+  // fast_impact with Bullet's exact test runs away at its fourth step (docs/BENCHMARK.md,
+  // "Runaways"): stderr says so then, with the body pair and the count, not only in the run's
+  // summary at the end (a runaway can fill the memory first).
+  if (!SensorPipeline::available()) GTEST_SKIP() << "built without psc::bullet";
+  const Outcome o = run("--scene fast_impact --resolution 200 --steps 8 --truth none --no-penetration --pipeline sensors");
+  ASSERT_TRUE(o.exited && o.code == 0) << o.output;
+  const std::size_t live = o.output.find("psc_demo: RUNAWAY in fast_impact (sensors) at step 4: runaway contact between bodies 0 and 1: ");
+  ASSERT_NE(live, std::string::npos) << o.output;
+  const std::size_t summary = o.output.find("RUNAWAY in ", live + 20);
+  ASSERT_NE(summary, std::string::npos) << o.output;
+  EXPECT_NE(o.output.find("(first: step 4: runaway contact between bodies 0 and 1: ", summary), std::string::npos) << o.output;
+}
+
 TEST(DemoCli, BulletClusterRunsAreNamedAndMeasured) {
   // A tiny cloth_fold: after the runs of --pipeline, two Bullet cluster runs per k, named in the
   // table, the stderr lines and the JSON, with the times and the self-crossing counts of every run.
