@@ -219,6 +219,20 @@ SelfRule selfRule(const std::vector<std::vector<Triangle>>& triangles, std::vect
   return rule;
 }
 
+Vec3 meanDisplacement(const TruthBody& body) {
+  std::vector<char> used(body.x.size(), 0);
+  for (const Triangle& t : body.triangles)
+    for (Index v : t) used[v] = 1;
+  Vec3 sum = Vec3::Zero();
+  double n = 0.0;
+  for (std::size_t v = 0; v < body.x.size(); ++v)
+    if (used[v]) {
+      sum += body.x[v] - body.prev[v];
+      n += 1.0;
+    }
+  return n > 0.0 ? Vec3(sum / n) : Vec3::Zero();
+}
+
 const TruthResult& GroundTruth::computeSelf(const std::vector<TruthBody>& bodies, const SelfRule& rule,
                                             const TruthSettings& s) {
   self_result_.contacts.clear();
@@ -227,9 +241,10 @@ const TruthResult& GroundTruth::computeSelf(const std::vector<TruthBody>& bodies
   for (std::size_t a = 0; a < bodies.size(); ++a) {
     const TruthBody& A = bodies[a];
     const double rs = rule.radius(A, a);
+    const Vec3 mean = meanDisplacement(A);
     for (std::size_t v = 0; v < A.x.size(); ++v) {
       const Vec3& p = A.x[v];
-      const double motion = s.full ? 2.0 * (p - A.prev[v]).norm() : 0.0;
+      const double motion = s.full ? 2.0 * selfMotion(p - A.prev[v], mean) : 0.0;
       const double rf = rs + motion, rmax = s.full ? rf : rs;
       const double reach = rmax + band(rmax, s);
       grid_.forEachInBox(p - Vec3::Constant(reach), p + Vec3::Constant(reach), [&](Index b, Index t) {
@@ -281,7 +296,8 @@ TruthResult groundTruthSelfBruteForce(const std::vector<TruthBody>& bodies, cons
   for (std::size_t a = 0; a < bodies.size(); ++a) {
     const TruthBody& A = bodies[a];
     const double rs = rule.radius(A, a);
-    const auto motion = [&](Index v) { return s.full ? 2.0 * (A.x[v] - A.prev[v]).norm() : 0.0; };
+    const Vec3 mean = meanDisplacement(A);
+    const auto motion = [&](Index v) { return s.full ? 2.0 * selfMotion(A.x[v] - A.prev[v], mean) : 0.0; };
     const auto radius = [&](Index v) {
       const double rmax = s.full ? rs + motion(v) : rs;
       return std::nextafter(rmax + band(rmax, s), std::numeric_limits<double>::infinity());

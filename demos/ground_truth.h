@@ -39,6 +39,10 @@ struct SelfRule {
   double radius(const TruthBody& body, std::size_t b) const;
 };
 
+/// The body's mean displacement (x − prev) over its vertices that are in triangles: the `mean` of
+/// its self motion term (psc::selfMotion).
+Vec3 meanDisplacement(const TruthBody& body);
+
 /// The rule for bodies with these triangles and rest shapes, with the core's default factors.
 SelfRule selfRule(const std::vector<std::vector<Triangle>>& triangles, std::vector<std::vector<Vec3>> rest);
 
@@ -132,7 +136,8 @@ class GroundTruth {
  public:
   const TruthResult& compute(const std::vector<TruthBody>& bodies, const TruthSettings& settings);
   /// Every body's contacts with itself (keys with vertex_body == triangle_body): strict radius
-  /// R = rule.radius(b), full R + 2·|x_v − x_v,prev|, without the pairs testkit::selfPairExcluded
+  /// R = rule.radius(b), full R + 2·psc::selfMotion(x_v − x_v,prev, meanDisplacement(body)),
+  /// without the pairs testkit::selfPairExcluded
   /// names for the rule. Its own result: compute()'s stays valid.
   const TruthResult& computeSelf(const std::vector<TruthBody>& bodies, const SelfRule& rule,
                                  const TruthSettings& settings);

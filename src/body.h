@@ -192,10 +192,19 @@ struct RestFit {
   std::vector<double> region_half;
   std::vector<Vec3> region_sum_x;           ///< Σ x over the region's own vertices
   std::vector<Eigen::Matrix3d> region_xr;   ///< Σ x restᵀ over them
+  // The self motion term (psc::selfMotion): a vertex's displacement this step against the body's
+  // mean displacement `mean_motion`, bounded per chunk from the box of its own vertices'
+  // displacements, never above the chunk's largest displacement (chunk_box[c].motion).
+  Vec3 sum_motion = Vec3::Zero();
+  double moved = 0.0;                        ///< vertices in sum_motion
+  std::vector<Vec3> move_lo, move_hi;        ///< per chunk, the box of its own vertices' displacements
+  Vec3 mean_motion = Vec3::Zero();
+  std::vector<double> chunk_self_motion;     ///< largest selfMotion of a chunk's own vertices (bound)
+  std::vector<double> region_self_motion;    ///< the same over a region's chunks
   std::size_t bytes() const {
     const std::size_t regions = region_count.capacity(), chunks = chunk_rest_radius.capacity();
-    return regions * (2 * sizeof(double) + 4 * sizeof(Vec3) + 4 * sizeof(Eigen::Matrix3d)) +
-           chunks * (2 * sizeof(double) + 4 * sizeof(Vec3));
+    return regions * (3 * sizeof(double) + 4 * sizeof(Vec3) + 4 * sizeof(Eigen::Matrix3d)) +
+           chunks * (3 * sizeof(double) + 6 * sizeof(Vec3));
   }
 };
 

@@ -70,7 +70,7 @@ Vec3 load(const char* base, std::size_t stride, Index v) {
 // With `swept`, a vertex's previous position goes into the same boxes instead of a motion term.
 /// The refit's pass without the rest-shape bound.
 struct NoRestFit {
-  void own(std::size_t /*v*/, Index /*c*/, const Vec3& /*x*/) {}
+  void own(std::size_t /*v*/, Index /*c*/, const Vec3& /*x*/, const Vec3* /*displacement*/) {}
   void foreign(std::size_t /*v*/, Index /*c*/, const Vec3& /*x*/) {}
 };
 
@@ -80,9 +80,15 @@ struct NoRestFit {
 class RestFitPass {
  public:
   RestFitPass(RestFit& f, const ChunkLists& ch, const std::vector<Vec3>& rest) : f_(f), ch_(ch), rest_(rest) {}
-  [[gnu::always_inline]] void own(std::size_t v, Index c, const Vec3& x) {
+  [[gnu::always_inline]] void own(std::size_t v, Index c, const Vec3& x, const Vec3* displacement) {
     const Index r = ch_.region_of[c];
     if (r != region_) switchTo(r);
+    if (displacement != nullptr) {
+      f_.move_lo[c] = f_.move_lo[c].cwiseMin(*displacement);
+      f_.move_hi[c] = f_.move_hi[c].cwiseMax(*displacement);
+      sum_motion_ += *displacement;
+      moved_ += 1.0;
+    }
     const Vec3& p = rest_[v];
     y_ = x - rot_ * p;
     f_.chunk_lo[c] = f_.chunk_lo[c].cwiseMin(y_);
@@ -98,6 +104,10 @@ class RestFitPass {
   }
   /// Adds the current run's sums to its region; call once after the pass.
   void flush() {
+    f_.sum_motion += sum_motion_;
+    f_.moved += moved_;
+    sum_motion_.setZero();
+    moved_ = 0.0;
     if (region_ == kInvalidIndex) return;
     f_.region_sum_x[region_] += sum_x_;
     f_.region_xr[region_] += xr_;
@@ -118,6 +128,8 @@ class RestFitPass {
   Eigen::Matrix3d rot_ = Eigen::Matrix3d::Identity();
   Eigen::Matrix3d xr_ = Eigen::Matrix3d::Zero();
   Vec3 sum_x_ = Vec3::Zero();
+  Vec3 sum_motion_ = Vec3::Zero();
+  double moved_ = 0.0;
   Vec3 y_ = Vec3::Zero();
   Index region_ = kInvalidIndex;
 };
@@ -135,7 +147,6 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
     const T* p = reinterpret_cast<const T*>(base + v * stride);
     const double x = static_cast<double>(p[0]), y = static_cast<double>(p[1]), z = static_cast<double>(p[2]);
     sum += x + y + z;
-    hook.own(v, c, Vec3(x, y, z));
     MotionBox& box = boxes[c];
     box.lo = box.lo.cwiseMin(Vec3(x, y, z));
     box.hi = box.hi.cwiseMax(Vec3(x, y, z));
@@ -149,11 +160,16 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
         q_hi = q_hi.cwiseMax(qv);
         box.lo = box.lo.cwiseMin(qv);
         box.hi = box.hi.cwiseMax(qv);
+        hook.own(v, c, Vec3(x, y, z), nullptr);
       } else {
-        const double m2 = (Vec3(x, y, z) - qv).squaredNorm();
+        const Vec3 d = Vec3(x, y, z) - qv;
+        const double m2 = d.squaredNorm();
         sum += m2;
         box.motion = m2 > box.motion ? m2 : box.motion;  // squared until the end of the pass
+        hook.own(v, c, Vec3(x, y, z), &d);
       }
+    } else {
+      hook.own(v, c, Vec3(x, y, z), nullptr);
     }
     for (Index f : ch.foreign_of.row(static_cast<Index>(v))) {
       MotionBox& fb = boxes[f];
@@ -221,6 +237,10 @@ void startRestFit(Body& b) {
   f.chunk_hi.assign(chunks, Vec3::Constant(-std::numeric_limits<double>::infinity()));
   f.region_sum_x.assign(regions, Vec3::Zero());
   f.region_xr.assign(regions, Eigen::Matrix3d::Zero());
+  f.sum_motion.setZero();
+  f.moved = 0.0;
+  f.move_lo.assign(chunks, Vec3::Constant(std::numeric_limits<double>::infinity()));
+  f.move_hi.assign(chunks, Vec3::Constant(-std::numeric_limits<double>::infinity()));
 }
 
 /// After the pass: each region's fit (the rotation that best carries its rest shape onto its
@@ -282,6 +302,20 @@ void finishRestFit(Body& b) {
       rhi = rhi.cwiseMax(f.chunk_hi[c]);
     }
     centreAndHalf(rlo, rhi, f.region_center[r], f.region_half[r]);
+  }
+  // The self motion term: every own vertex's displacement d lies in its chunk's box, so
+  // selfMotion(d, mean) ≤ min(the chunk's largest |d|, the farthest corner of the box from mean).
+  f.mean_motion = f.moved > 0.0 ? Vec3(f.sum_motion / f.moved) : Vec3::Zero();
+  f.chunk_self_motion.resize(chunks);
+  f.region_self_motion.assign(regions, 0.0);
+  for (Index c = 0; c < chunks; ++c) {
+    double bound = b.chunk_box[c].motion;
+    if ((f.move_lo[c].array() <= f.move_hi[c].array()).all()) {
+      const Vec3 far = (f.move_lo[c] - f.mean_motion).cwiseAbs().cwiseMax((f.move_hi[c] - f.mean_motion).cwiseAbs());
+      bound = std::min(bound, far.norm() * (1.0 + 1e-12));
+    }
+    f.chunk_self_motion[c] = bound;
+    f.region_self_motion[ch.region_of[c]] = std::max(f.region_self_motion[ch.region_of[c]], bound);
   }
   f.filled = true;
 }
@@ -558,6 +592,9 @@ struct PairContext {
   StepStats& counters;
   Scratch& s;
   double self_exclude2 = -1.0;  ///< vb == tb: squared rest distance below which a pair is excluded
+  /// vb == tb with the self motion term (RestFit::mean_motion): a vertex's motion term is
+  /// selfMotion of its displacement against it.
+  const Vec3* self_mean_motion = nullptr;
 };
 
 /// Self-collision's exclusion rule: the triangle holds the vertex, or the two were within the
@@ -578,9 +615,12 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
   if (c.vertices_at >= 0) return;
   c.vertices_at = static_cast<int>(ctx.s.verts.size());
   const bool swept = ctx.swept && !ctx.vb.previous.empty();
+  const bool self_motion = ctx.self_mean_motion != nullptr && !ctx.vb.previous.empty();
   for (Index v : ctx.vb.chunks.vertices(c.chunk)) {
     Vec3 x = ctx.vb.positions[v];
-    double r = ctx.margin_sum + ctx.motion_factor * ctx.vb.vertexMotion(v);
+    const double motion =
+        self_motion ? selfMotion(x - ctx.vb.previous[v], *ctx.self_mean_motion) : ctx.vb.vertexMotion(v);
+    double r = ctx.margin_sum + ctx.motion_factor * motion;
     if (swept) {
       // The ball about the path's midpoint with half its length holds the whole path.
       const Vec3 q = ctx.vb.previous[v];
@@ -866,13 +906,27 @@ class Collector {
     // The self radius R stands for margin_A + margin_B: each side's boxes grow by R / 2.
     const double radius = selfContactRadius(X.margin, X.rest_mean_edge, params_.self_radius_edges);
     const double half = 0.5 * radius;
+    // With the radius bound the motion term is the self one (psc::selfMotion), bounded per chunk
+    // and region by the refit (RestFit); with the swept bound, the boxes hold the paths.
+    const RestFit& fit = X.rest_fit;
+    const bool self_motion = fit.filled && !params_.swept;
+    const auto regionBox = [&](Index r) {
+      MotionBox box = X.region_box[r];
+      if (self_motion) box.motion = fit.region_self_motion[r];
+      return box;
+    };
+    const auto chunkBox = [&](Index c) {
+      MotionBox box = X.chunk_box[c];
+      if (self_motion) box.motion = fit.chunk_self_motion[c];
+      return box;
+    };
     std::vector<Grown>& boxes = self_boxes_;
     boxes.resize(X.regionCount());
     s_.items_a.clear();
     const int ax = longestAxis(X.body_box.lo, X.body_box.hi);
     region_pairs_.clear();
     for (Index r = 0; r < X.regionCount(); ++r) {
-      boxes[r] = grown(X.region_box[r], half, mf);
+      boxes[r] = grown(regionBox(r), half, mf);
       s_.items_a.push_back({boxes[r].lo[ax], boxes[r].hi[ax], r});
       region_pairs_.emplace_back(r, r);
     }
@@ -883,10 +937,11 @@ class Collector {
     const double exclude = params_.self_rest_exclusion * radius;
     Group g{X.id, X.id, {}};
     const Axis no_axis;
-    const PairContext ctx{X, X, radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude};
+    const PairContext ctx{X,         X,  radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude,
+                          self_motion ? &fit.mean_motion : nullptr};
     const auto t0 = std::chrono::steady_clock::now();
     // The rest-shape bound needs the radius bound's reach (a swept pair may meet during the step).
-    const bool rest_bound = params_.self_rest_bound && !params_.swept && X.rest_fit.filled;
+    const bool rest_bound = params_.self_rest_bound && self_motion;
     // The largest reach of the vertices in box b (reachOf of the largest radius and coordinate).
     const auto reachIn = [&](const MotionBox& b) {
       return (radius + mf * b.motion) * (1.0 + 1e-5) + 1e-6 * std::max(b.lo.cwiseAbs().maxCoeff(), b.hi.cwiseAbs().maxCoeff());
@@ -894,15 +949,16 @@ class Collector {
     for (const auto& [ri, rj] : region_pairs_) {
       ++counters_.self_region_pairs;
       if (rest_bound &&
-          restApartRegions(X, ri, rj, exclude, std::max(reachIn(X.region_box[ri]), reachIn(X.region_box[rj])))) {
+          restApartRegions(X, ri, rj, exclude, std::max(reachIn(regionBox(ri)), reachIn(regionBox(rj))))) {
         ++counters_.self_region_pairs_unbent;
         continue;
       }
-      nearChunks(X, ri, half, boxes[rj], no_axis, s_.near_a);
+      const std::vector<double>* motion = self_motion ? &fit.chunk_self_motion : nullptr;
+      nearChunks(X, ri, half, boxes[rj], no_axis, s_.near_a, motion);
       if (s_.near_a.empty()) continue;
       const bool same = ri == rj;
       if (!same) {
-        nearChunks(X, rj, half, boxes[ri], no_axis, s_.near_b);
+        nearChunks(X, rj, half, boxes[ri], no_axis, s_.near_b, motion);
         if (s_.near_b.empty()) continue;
       }
       std::vector<ChunkRef>& other = same ? s_.near_a : s_.near_b;
@@ -931,7 +987,7 @@ class Collector {
         ChunkRef& ca = s_.near_a[ka];
         ChunkRef& cb = other[kb];
         const auto collect = [&](ChunkRef& cv, ChunkRef& ct) {
-          if (rest_bound && restApartChunks(X, cv.chunk, ct.chunk, exclude, reachIn(X.chunk_box[cv.chunk]))) {
+          if (rest_bound && restApartChunks(X, cv.chunk, ct.chunk, exclude, reachIn(chunkBox(cv.chunk)))) {
             ++counters_.self_chunk_pairs_unbent;
             return;
           }
@@ -1018,11 +1074,14 @@ class Collector {
 
   /// The chunks of region r of X whose grown boxes reach `other`, with their extents along `axis`.
   /// Region r's chunks of X whose boxes, grown by `margin` and the motion term, meet `other`.
+  /// `motion`: per chunk, the motion term's length to grow by instead of chunk_box[c].motion.
   void nearChunks(const Body& X, Index r, double margin, const Grown& other, const Axis& axis,
-                  std::vector<ChunkRef>& out) {
+                  std::vector<ChunkRef>& out, const std::vector<double>* motion = nullptr) {
     out.clear();
     for (Index c = X.chunks.region_begin[r]; c < X.chunks.region_begin[r + 1]; ++c) {
-      const Grown g = grown(X.chunk_box[c], margin, params_.motion_factor);
+      MotionBox box = X.chunk_box[c];
+      if (motion != nullptr) box.motion = (*motion)[c];
+      const Grown g = grown(box, margin, params_.motion_factor);
       if (!overlap(g, other)) continue;
       ChunkRef ref{c, 0.0, 0.0, g};
       if (axis.valid) axis.extent(X.chunk_box[c], ref.lo_n, ref.hi_n);

@@ -89,11 +89,10 @@ struct SensorWorld::Impl {
   void partitionBody(Body& b, std::size_t count);
   void preparePartitions(StepStats& stats);
   void refitAndCheck(Body& b, StepStats& stats);
-  /// Whether the refit carries b's rest-shape bound: what the self-collision cull reads with
-  /// MotionBound::Radius in the default midphase.
+  /// Whether the refit carries b's self-collision part (the rest-shape bound and the self motion
+  /// term): what the self-collision cull reads with MotionBound::Radius in the default midphase.
   bool restFitOn(const Body& b) const {
-    return b.selfCollides() && settings.self_rest_bound && settings.motion_bound == MotionBound::Radius &&
-           settings.flagging != Flagging::Sensors;
+    return b.selfCollides() && settings.motion_bound == MotionBound::Radius && settings.flagging != Flagging::Sensors;
   }
   void moveParticles(StepStats& stats, double r_eff);
   const std::vector<Index>& ringOf(std::size_t particle, const Body& b, Index region, Index v);

@@ -10,6 +10,8 @@
 #include "psc/settings.h"
 #include "psc/types.h"
 
+#include <algorithm>
+
 #include <map>
 #include <memory>
 #include <string>
@@ -135,7 +137,9 @@ class SensorWorld {
   void setPositions(BodyId id, const PositionView& positions, const PositionView& previous = {});
   void setMargin(BodyId id, double margin);
   /// Self-collision of one body: its vertices against its own triangles, within the self contact
-  /// radius (selfRadius) plus the motion term. A pair is never a candidate when the triangle holds
+  /// radius (selfRadius) plus motion_factor × selfMotion (with MotionBound::Radius: the vertex's
+  /// motion against the body's own, so that a body moving as a whole does not meet itself at the
+  /// radius its speed gives Bullet's test). A pair is never a candidate when the triangle holds
   /// the vertex, or when the two were closer than self_rest_exclusion × the self contact radius
   /// in the body's rest shape, i.e. its positions when self-collision was switched on (or the
   /// body added with it): what touches at rest is the surface itself, not a fold. Switching it on
@@ -184,5 +188,14 @@ class SensorWorld {
 /// rest_mean_edge is the mean edge length of its rest shape (edgeStats(...).mean). One definition
 /// for the core, the Bullet plugin's self contacts and the demo's self truth.
 double selfContactRadius(double margin, double rest_mean_edge, double self_radius_edges);
+
+/// The length of a self pair's motion term for its vertex: min(|d|, |d − mean|), d the vertex's
+/// displacement this step (position − previous position) and `mean` the body's mean displacement
+/// over its vertices that are in triangles. Bullet's vertex–face test grows its radius by 2·|d|: a
+/// body flying at speed would take its own neighbours for contacts. Against the body's mean, a
+/// body moving as a whole has none, and a part moving towards the rest keeps its term (never more
+/// than Bullet's, so Bullet's test accepts every self candidate within it). One definition for the
+/// core's self candidates and the demo's self truth.
+inline double selfMotion(const Vec3& d, const Vec3& mean) { return std::min(d.norm(), (d - mean).norm()); }
 
 }  // namespace psc
