@@ -144,6 +144,69 @@ TEST(SelfCollision, FlatClothHasNoSelfCandidatesFoldedClothHasEveryPairOfItsLaye
   EXPECT_TRUE(selfCandidates(w.step(), id, dup).empty());
 }
 
+TEST(SelfCollision, ABodyMeetsItselfByItsMotionAgainstItselfNotByItsSpeed) {
+  // A cloth folded with its layers 1.6 R apart (beyond the self radius R). Moved fast as a whole
+  // this step, Bullet's radius R + 2·|d| would take the layers for contacts; the self motion term
+  // (psc::selfMotion: |d| against the body's mean displacement) gives none. With its top layer
+  // also moving down by R relative to the rest, both layers reach across, and the candidates are
+  // exactly the brute force's pairs within R + 2·selfMotion.
+  TriMesh cloth = makePatch(2.0, 1.0, 41, 21);
+  const std::vector<Vec3> rest = cloth.vertices;
+  BodyDesc d;
+  d.triangles = cloth.triangles;
+  d.positions = PositionView::of(cloth.vertices);
+  d.margin = 0.01;
+  d.self_collision = true;
+  SensorWorld w;
+  const BodyId id = w.addBody(d);
+  w.step();
+  const double radius = w.selfRadius(id), mf = w.settings().motion_factor;
+  const std::vector<Vec3> now = folded(rest, 0.0, 0.8 * radius);
+  const Vec3 fast(0.5, 0.2, -0.3);
+  for (const bool top_moves : {false, true}) {
+    std::vector<Vec3> before(now.size());
+    for (std::size_t v = 0; v < now.size(); ++v) {
+      const bool top = now[v].z() > 1.5 * radius;
+      before[v] = now[v] - fast - (top_moves && top ? Vec3(0, 0, -radius) : Vec3::Zero());
+    }
+    w.setPositions(id, PositionView::of(now), PositionView::of(before));
+    std::size_t dup = 0;
+    const std::set<std::pair<Index, Index>> got = selfCandidates(w.step(), id, dup);
+    EXPECT_EQ(dup, 0u);
+    Vec3 mean = Vec3::Zero();
+    for (std::size_t v = 0; v < now.size(); ++v) mean += now[v] - before[v];
+    mean /= double(now.size());
+    std::set<std::pair<Index, Index>> expected;
+    std::size_t bullet_would = 0;
+    for (Index v = 0; v < now.size(); ++v) {
+      const Vec3 disp = now[v] - before[v];
+      const double reach = radius + mf * selfMotion(disp, mean);
+      for (Index t = 0; t < cloth.triangles.size(); ++t) {
+        const Triangle& tri = cloth.triangles[t];
+        if (tri[0] == v || tri[1] == v || tri[2] == v) continue;
+        if (testkit::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) <
+            w.settings().self_rest_exclusion * radius)
+          continue;
+        const double dist = testkit::pointTriangleDistance(now[v], now[tri[0]], now[tri[1]], now[tri[2]]);
+        bullet_would += dist < radius + mf * disp.norm();
+        if (dist < reach * (1.0 - 1e-6)) expected.insert({v, t});
+        if (got.count({v, t})) {
+          EXPECT_LT(dist, reach * (1.0 + 1e-4)) << v << ", " << t;
+        }
+      }
+    }
+    EXPECT_GT(bullet_would, 1000u) << "the speed alone would make the layers meet";
+    std::size_t missed = 0;
+    for (const auto& p : expected) missed += got.count(p) == 0;
+    EXPECT_EQ(missed, 0u) << "of " << expected.size();
+    if (top_moves) {
+      EXPECT_GT(expected.size(), 100u) << "the top layer coming down meets the bottom one";
+    } else {
+      EXPECT_TRUE(got.empty()) << got.size() << " pairs of a body moving as a whole";
+    }
+  }
+}
+
 TEST(SelfCollision, TheSelfRadiusIsTwiceTheMarginOrAMultipleOfTheMeanRestEdgeWhicheverIsLarger) {
   TriMesh cloth = makePatch(2.0, 1.0, 41, 21);
   const double base = SensorSettings{}.self_radius_edges * patchMeanEdge(2.0, 1.0, 41, 21);  // 1.25 × 0.0567
