@@ -65,6 +65,17 @@ Reference bruteForce(const TriMesh& mesh, const std::vector<Vec3>& rest, double 
   return r;
 }
 
+/// A body of `mesh` (positions viewed in place) with self-collision on: its positions now are its
+/// rest shape.
+BodyDesc selfColliding(const TriMesh& mesh, double margin) {
+  BodyDesc d;
+  d.triangles = mesh.triangles;
+  d.positions = PositionView::of(mesh.vertices);
+  d.margin = margin;
+  d.self_collision = true;
+  return d;
+}
+
 /// The mean edge of makePatch(w, h, nx, ny) in closed form: (nx−1)·ny edges of w/(nx−1) along x,
 /// nx·(ny−1) of h/(ny−1) along y and (nx−1)·(ny−1) diagonals.
 double patchMeanEdge(double w, double h, double nx, double ny) {
@@ -152,13 +163,8 @@ TEST(SelfCollision, ABodyMeetsItselfByItsMotionAgainstItselfNotByItsSpeed) {
   // exactly the brute force's pairs within R + 2·selfMotion.
   TriMesh cloth = makePatch(2.0, 1.0, 41, 21);
   const std::vector<Vec3> rest = cloth.vertices;
-  BodyDesc d;
-  d.triangles = cloth.triangles;
-  d.positions = PositionView::of(cloth.vertices);
-  d.margin = 0.01;
-  d.self_collision = true;
   SensorWorld w;
-  const BodyId id = w.addBody(d);
+  const BodyId id = w.addBody(selfColliding(cloth, 0.01));
   w.step();
   const double radius = w.selfRadius(id), mf = w.settings().motion_factor;
   const std::vector<Vec3> now = folded(rest, 0.0, 0.8 * radius);
@@ -310,12 +316,7 @@ TEST(SelfCollision, TheRestShapeBoundFollowsASpinningBody) {
   const TriMesh ball = makeSphere(1.0, 1500);
   const Vec3 axis = Vec3(1, -2, 0.5).normalized(), velocity(0.005, 0.0025, -0.0075);
   SensorWorld w;
-  BodyDesc d;
-  d.triangles = ball.triangles;
-  d.positions = PositionView::of(ball.vertices);
-  d.margin = 0.01;
-  d.self_collision = true;
-  const BodyId id = w.addBody(d);
+  const BodyId id = w.addBody(selfColliding(ball, 0.01));
   std::vector<Vec3> now = ball.vertices, before = ball.vertices;
   for (int step = 0; step < 12; ++step) {
     before = now;
