@@ -195,7 +195,8 @@ double selfContactRadius(double margin, double rest_mean_edge, double self_radiu
 /// body flying at speed would take its own neighbours for contacts. Against the body's mean, a
 /// body moving as a whole has none, and a part moving towards the rest keeps its term (never more
 /// than Bullet's, so Bullet's test accepts every self candidate within it). One definition for the
-/// core's self candidates and the demo's self truth.
+/// core's self candidates and the demo's self truth. (When a body's previous positions come in
+/// another scalar type than its positions, the core takes mean = 0 for it: Bullet's term.)
 inline double selfMotion(const Vec3& d, const Vec3& mean) { return std::min(d.norm(), (d - mean).norm()); }
 
 }  // namespace psc
