@@ -227,7 +227,9 @@ struct Body {
   std::vector<Vec3> rest;
   double rest_mean_edge = 0.0;  ///< mean edge length of `rest` (the self contact radius's base)
   bool selfCollides() const { return !rest.empty(); }
-  RestFit rest_fit;  ///< rebuilt (built = false) whenever `rest` or the chunks change
+  /// Only for a self-colliding body (made by its first refit; dropped whenever `rest` or the
+  /// chunks change), so that the other bodies do not pay its size.
+  std::unique_ptr<RestFit> rest_fit;
   MeshReport report;
   std::size_t vertices_in_triangles = 0;
 

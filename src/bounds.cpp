@@ -196,7 +196,8 @@ void measureChunk(const ChunkLists& ch, Index chunk, const char* base, std::size
 /// The rest-shape bound's set-up (rest spheres, region rest centroids; rotations to identity) when
 /// the body's chunks or rest shape changed, and the per-step part's reset before the pass.
 void startRestFit(Body& b) {
-  RestFit& f = b.rest_fit;
+  if (!b.rest_fit) b.rest_fit = std::make_unique<RestFit>();
+  RestFit& f = *b.rest_fit;
   const ChunkLists& ch = b.chunks;
   const std::size_t regions = b.regionCount(), chunks = ch.count();
   if (!f.built || f.region_count.size() != regions || f.chunk_rest_radius.size() != chunks) {
@@ -251,7 +252,7 @@ void startRestFit(Body& b) {
 /// turn, or the first step after a jump), the region's y-boxes are redone with the fit: a second
 /// pass over that region's tables only.
 void finishRestFit(Body& b) {
-  RestFit& f = b.rest_fit;
+  RestFit& f = *b.rest_fit;
   const ChunkLists& ch = b.chunks;
   const std::size_t regions = b.regionCount(), chunks = ch.count();
   f.chunk_center.resize(chunks);
@@ -342,14 +343,14 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
   rest_fit = rest_fit && !swept && b.selfCollides();
   if (rest_fit) {
     startRestFit(b);
-    RestFitPass pass(b.rest_fit, ch, b.rest);
+    RestFitPass pass(*b.rest_fit, ch, b.rest);
     if (is_float)
       streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, pass);
     else
       streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, pass);
     pass.flush();
   } else {
-    b.rest_fit.filled = false;
+    if (b.rest_fit) b.rest_fit->filled = false;
     NoRestFit none;
     if (is_float)
       streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, none);
@@ -840,7 +841,7 @@ bool restClears(double exclusion, double deviation, double reach) {
 
 /// No (vertex of chunk a, triangle of chunk b) pair of X can be a candidate.
 bool restApartChunks(const Body& X, Index a, Index b, double exclusion, double reach) {
-  const RestFit& f = X.rest_fit;
+  const RestFit& f = *X.rest_fit;
   const std::vector<Index>& region_of = X.chunks.region_of;
   return restClears(exclusion,
                     restDeviation(f, region_of[a], f.chunk_center[a], f.chunk_half[a], region_of[b], f.chunk_center[b],
@@ -850,7 +851,7 @@ bool restApartChunks(const Body& X, Index a, Index b, double exclusion, double r
 
 /// No pair between regions i and j of X (both directions) can be a candidate.
 bool restApartRegions(const Body& X, Index i, Index j, double exclusion, double reach) {
-  const RestFit& f = X.rest_fit;
+  const RestFit& f = *X.rest_fit;
   return restClears(exclusion,
                     restDeviation(f, i, f.region_center[i], f.region_half[i], j, f.region_center[j], f.region_half[j],
                                   f.region_rest_center[j], f.region_rest_radius[j]),
@@ -908,7 +909,8 @@ class Collector {
     const double half = 0.5 * radius;
     // With the radius bound the motion term is the self one (psc::selfMotion), bounded per chunk
     // and region by the refit (RestFit); with the swept bound, the boxes hold the paths.
-    const RestFit& fit = X.rest_fit;
+    static const RestFit kNone;
+    const RestFit& fit = X.rest_fit ? *X.rest_fit : kNone;
     const bool self_motion = fit.filled && !params_.swept;
     const auto regionBox = [&](Index r) {
       MotionBox box = X.region_box[r];

@@ -110,7 +110,7 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
   b.mean_edge = edgeStats(topology, b.positions).mean;
   b.chunks = detail::buildChunks(topology, b.positions, b.partition.region_of, b.partition.regionCount(),
                                  settings.chunk_vertices);
-  b.rest_fit.built = false;
+  b.rest_fit.reset();
   // The repartition check compares with what the same refit measures now (A* and the longest edge).
   detail::refitBounds(b, true, settings.motion_bound == MotionBound::Swept, restFitOn(b));
   b.max_edge = b.shape.max_edge;
@@ -348,7 +348,7 @@ std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
   b->parts = desc.parts;
   if (desc.self_collision) {
     b->rest = restShape(desc.positions);
-    b->rest_fit.built = false;
+    b->rest_fit.reset();
     b->rest_mean_edge = edgeStats(*b->topology, desc.positions).mean;
   }
   return b;
@@ -412,7 +412,7 @@ void SensorWorld::setSelfCollision(BodyId id, bool on) {
   if (on) checkSelfCollisionMode(impl_->settings, b.label());
   if (on) checkFinite(b.positions, b.label());
   b.rest = on ? restShape(b.positions) : std::vector<Vec3>{};
-  b.rest_fit = detail::RestFit{};
+  b.rest_fit.reset();
   b.rest_mean_edge = on ? edgeStats(b.fullTopology(), b.positions).mean : 0.0;
 }
 
@@ -569,7 +569,7 @@ std::size_t SensorWorld::memoryBytes(BodyId id) const {
          b.partition.code_vectors.capacity() * sizeof(b.partition.code_vectors[0]) +
          b.particle_vertex.capacity() * sizeof(Index) + b.chunks.bytes() +
          (b.chunk_box.capacity() + b.region_box.capacity()) * sizeof(detail::MotionBox) +
-         b.rest.capacity() * sizeof(Vec3) + b.rest_fit.bytes();
+         b.rest.capacity() * sizeof(Vec3) + (b.rest_fit ? sizeof(detail::RestFit) + b.rest_fit->bytes() : 0);
 }
 
 const MeshReport& SensorWorld::report(BodyId id) const { return impl_->get(id).report; }
