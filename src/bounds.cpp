@@ -839,14 +839,22 @@ bool restClears(double exclusion, double deviation, double reach) {
   return exclusion - deviation >= reach * (1.0 + 1e-9);
 }
 
-/// No (vertex of chunk a, triangle of chunk b) pair of X can be a candidate.
+/// No (vertex of chunk a, triangle of chunk b) pair of X can be a candidate. Chunks of one region
+/// share its rotation, and their y-boxes give the deviations exactly for any k: the distance from k
+/// to each box's farthest corner. k is tried at the two centres and halfway between them.
 bool restApartChunks(const Body& X, Index a, Index b, double exclusion, double reach) {
   const RestFit& f = *X.rest_fit;
   const std::vector<Index>& region_of = X.chunks.region_of;
-  return restClears(exclusion,
-                    restDeviation(f, region_of[a], f.chunk_center[a], f.chunk_half[a], region_of[b], f.chunk_center[b],
-                                  f.chunk_half[b], f.chunk_rest_center[b], f.chunk_rest_radius[b]),
-                    reach);
+  double deviation = restDeviation(f, region_of[a], f.chunk_center[a], f.chunk_half[a], region_of[b],
+                                   f.chunk_center[b], f.chunk_half[b], f.chunk_rest_center[b], f.chunk_rest_radius[b]);
+  if (region_of[a] == region_of[b] && !restClears(exclusion, deviation, reach)) {
+    const auto farthest = [&](Index c, const Vec3& k) {
+      return (f.chunk_lo[c] - k).cwiseAbs().cwiseMax((f.chunk_hi[c] - k).cwiseAbs()).norm();
+    };
+    for (const Vec3& k : {f.chunk_center[a], f.chunk_center[b], Vec3(0.5 * (f.chunk_center[a] + f.chunk_center[b]))})
+      deviation = std::min(deviation, farthest(a, k) + farthest(b, k));
+  }
+  return restClears(exclusion, deviation, reach);
 }
 
 /// No pair between regions i and j of X (both directions) can be a candidate.
