@@ -171,8 +171,7 @@ inline bool flaggedLess(const FlaggedPair& a, const FlaggedPair& b) {
 /// next step's R_r needs (the rotation that best carries the region's rest shape onto its current
 /// vertices). Nothing of it is read per vertex after the pass.
 struct RestFit {
-  bool built = false;  ///< the set-up part matches the body's chunks and rest shape
-  // Set-up (rest shape and chunks).
+  // Set-up (rest shape and chunks; made with the object).
   std::vector<double> region_count;       ///< own vertices of each region
   std::vector<Vec3> region_rest_mean;     ///< their rest centroid
   std::vector<Vec3> chunk_rest_center;    ///< the rest sphere of each chunk's vertex table

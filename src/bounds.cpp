@@ -7,7 +7,6 @@
 #include <cmath>
 #include <limits>
 
-#include <Eigen/SVD>
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -194,14 +193,14 @@ void measureChunk(const ChunkLists& ch, Index chunk, const char* base, std::size
 }
 
 /// The rest-shape bound's set-up (rest spheres, region rest centroids; rotations to identity) when
-/// the body's chunks or rest shape changed, and the per-step part's reset before the pass.
+/// the body has none (its rest shape or chunks changed: Body::rest_fit was dropped), and the
+/// per-step part's reset before the pass.
 void startRestFit(Body& b) {
-  if (!b.rest_fit) b.rest_fit = std::make_unique<RestFit>();
-  RestFit& f = *b.rest_fit;
   const ChunkLists& ch = b.chunks;
   const std::size_t regions = b.regionCount(), chunks = ch.count();
-  if (!f.built || f.region_count.size() != regions || f.chunk_rest_radius.size() != chunks) {
-    f = RestFit{};
+  if (!b.rest_fit || b.rest_fit->region_count.size() != regions || b.rest_fit->chunk_rest_radius.size() != chunks) {
+    b.rest_fit = std::make_unique<RestFit>();
+    RestFit& f = *b.rest_fit;
     f.region_count.assign(regions, 0.0);
     f.region_rest_mean.assign(regions, Vec3::Zero());
     f.chunk_rest_center.resize(chunks);
@@ -230,8 +229,8 @@ void startRestFit(Body& b) {
       f.region_rest_radius[r] = 0.5 * (rhi - rlo).norm();
     }
     f.next_rot.assign(regions, Eigen::Matrix3d::Identity());
-    f.built = true;
   }
+  RestFit& f = *b.rest_fit;
   f.filled = false;
   f.rot = f.next_rot;
   f.chunk_lo.assign(chunks, Vec3::Constant(std::numeric_limits<double>::infinity()));
@@ -1082,9 +1081,9 @@ class Collector {
     counters_.ms_candidates += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }
 
-  /// The chunks of region r of X whose grown boxes reach `other`, with their extents along `axis`.
-  /// Region r's chunks of X whose boxes, grown by `margin` and the motion term, meet `other`.
-  /// `motion`: per chunk, the motion term's length to grow by instead of chunk_box[c].motion.
+  /// Region r's chunks of X whose boxes, grown by `margin` and the motion term, meet `other`, with
+  /// their extents along `axis`. `motion`: per chunk, the motion term's length to grow by instead of
+  /// chunk_box[c].motion.
   void nearChunks(const Body& X, Index r, double margin, const Grown& other, const Axis& axis,
                   std::vector<ChunkRef>& out, const std::vector<double>* motion = nullptr) {
     out.clear();
