@@ -133,9 +133,12 @@ class RestFitPass {
   Index region_ = kInvalidIndex;
 };
 
+/// The refit's one pass over the vertices in memory order. With `copy`, each vertex's three
+/// coordinates are also written there, packed (3 T per vertex), for the repartition check's
+/// measures.
 template <typename T, typename Hook>
 void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev, std::size_t prev_stride,
-                 bool swept, std::vector<MotionBox>& boxes, double& sum, Hook& hook) {
+                 bool swept, std::vector<MotionBox>& boxes, double& sum, Hook& hook, T* copy) {
   const std::size_t n = ch.chunk_of.size();
   for (std::size_t v = 0; v < n; ++v) {
     // Positions usually live inside larger records (Bullet's nodes are 256 bytes): fetch ahead.
@@ -144,6 +147,7 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
     const Index c = ch.chunk_of[v];
     if (c == kInvalidIndex) continue;
     const T* p = reinterpret_cast<const T*>(base + v * stride);
+    if (copy != nullptr) std::copy(p, p + 3, copy + 3 * v);
     const double x = static_cast<double>(p[0]), y = static_cast<double>(p[1]), z = static_cast<double>(p[2]);
     sum += x + y + z;
     MotionBox& box = boxes[c];
@@ -179,7 +183,7 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
   }
 }
 
-// Area and longest edge of the triangles a chunk owns; their vertices were just read by the refit.
+// Area and longest edge of the triangles a chunk owns, from the refit's packed copy of the positions.
 template <typename T>
 void measureChunk(const ChunkLists& ch, Index chunk, const char* base, std::size_t stride, double& area,
                   double& max_edge2) {
@@ -339,22 +343,31 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
   const std::size_t prev_stride = b.previous.strideBytes();
   const bool is_float = b.positions.scalar() == PositionView::Scalar::Float32;
   double sum = 0.0;
+  // The check's measures read each triangle's corners. Read from the positions' own records
+  // (Bullet's nodes, 256 bytes apart) they miss the cache about three times per triangle on a
+  // large body, so the pass leaves a packed copy of the body's positions for them: 12 or 24 bytes
+  // per vertex, held only during this call.
+  std::vector<float> copy_f;
+  std::vector<double> copy_d;
+  if (measure) (is_float ? copy_f.resize(3 * ch.chunk_of.size()) : copy_d.resize(3 * ch.chunk_of.size()));
+  float* const cf = measure && is_float ? copy_f.data() : nullptr;
+  double* const cd = measure && !is_float ? copy_d.data() : nullptr;
   rest_fit = rest_fit && !swept && b.selfCollides();
   if (rest_fit) {
     startRestFit(b);
     RestFitPass pass(*b.rest_fit, ch, b.rest);
     if (is_float)
-      streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, pass);
+      streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, pass, cf);
     else
-      streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, pass);
+      streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, pass, cd);
     pass.flush();
   } else {
     if (b.rest_fit) b.rest_fit->filled = false;
     NoRestFit none;
     if (is_float)
-      streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, none);
+      streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, none, cf);
     else
-      streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, none);
+      streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, none, cd);
   }
   bool finite = std::isfinite(sum);
   for (MotionBox& box : b.chunk_box) {
@@ -389,9 +402,11 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
     for (std::size_t c = 0; c < ch.count(); ++c) {
       double& area = b.shape.region_area[ch.region_of[c]];
       if (is_float)
-        measureChunk<float>(ch, static_cast<Index>(c), base, stride, area, max_edge2);
+        measureChunk<float>(ch, static_cast<Index>(c), reinterpret_cast<const char*>(cf), 3 * sizeof(float), area,
+                            max_edge2);
       else
-        measureChunk<double>(ch, static_cast<Index>(c), base, stride, area, max_edge2);
+        measureChunk<double>(ch, static_cast<Index>(c), reinterpret_cast<const char*>(cd), 3 * sizeof(double), area,
+                             max_edge2);
     }
     b.shape.max_edge = std::sqrt(max_edge2);
   }
