@@ -555,28 +555,36 @@ struct KeptTriangles {
   std::vector<double> mid_x, mid_y, mid_z;  ///< self pairs: rest centroids
   std::vector<Index> record;  ///< index into Scratch::tris / Scratch::corners
   std::vector<unsigned char> meets;  ///< per probe: 1 when the vertex's ball meets the triangle's box
-  std::size_t size() const { return record.size(); }
-  void clear() {
+  std::size_t size() const { return count_; }
+  /// Empties the set, with room for `most` triangles (the arrays only grow: pushes write in place).
+  void reset(std::size_t most) {
+    count_ = 0;
+    if (record.size() >= most) return;
     for (std::vector<double>* v : {&lo_x, &lo_y, &lo_z, &hi_x, &hi_y, &hi_z, &n_lo, &n_hi, &mid_x, &mid_y, &mid_z})
-      v->clear();
-    record.clear();
+      v->resize(most);
+    record.resize(most);
+    meets.resize(most);
   }
   void push(const TriangleRec& tr, Index k, bool self) {
+    const std::size_t j = count_++;
     if (self) {
-      mid_x.push_back(tr.rest_mid.x());
-      mid_y.push_back(tr.rest_mid.y());
-      mid_z.push_back(tr.rest_mid.z());
+      mid_x[j] = tr.rest_mid.x();
+      mid_y[j] = tr.rest_mid.y();
+      mid_z[j] = tr.rest_mid.z();
     }
-    lo_x.push_back(tr.lo.x());
-    lo_y.push_back(tr.lo.y());
-    lo_z.push_back(tr.lo.z());
-    hi_x.push_back(tr.hi.x());
-    hi_y.push_back(tr.hi.y());
-    hi_z.push_back(tr.hi.z());
-    n_lo.push_back(tr.nlo);
-    n_hi.push_back(tr.nhi);
-    record.push_back(k);
+    lo_x[j] = tr.lo.x();
+    lo_y[j] = tr.lo.y();
+    lo_z[j] = tr.lo.z();
+    hi_x[j] = tr.hi.x();
+    hi_y[j] = tr.hi.y();
+    hi_z[j] = tr.hi.z();
+    n_lo[j] = tr.nlo;
+    n_hi[j] = tr.nhi;
+    record[j] = k;
   }
+
+ private:
+  std::size_t count_ = 0;
 };
 
 struct Scratch {
@@ -781,17 +789,21 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       // Only the triangles that reach the vertex chunk's grown box can meet any of its vertices.
       gatherTriangles(ctx, ct);
       KeptTriangles& kept = s.kept;
-      kept.clear();
+      kept.reset(nt);
       const Grown& vbox = cv.box;
       const double g = ctx.triangle_share;
+      // The vertex chunk's box and axis extent, brought to the triangles' side of the comparisons.
+      const Vec3 lo = vbox.lo.array() - g, hi = vbox.hi.array() + g;
+      const double n_lo = sensors ? cv.lo_n - vbox.g - g : -std::numeric_limits<double>::infinity();
+      const double n_hi = sensors ? cv.hi_n + vbox.g + g : std::numeric_limits<double>::infinity();
       for (std::size_t k = 0; k < nt; ++k) {
         const TriangleRec& tr = s.tris[static_cast<std::size_t>(ct.triangles_at) + k];
-        if ((tr.lo.array() - g <= vbox.hi.array()).all() && (vbox.lo.array() <= tr.hi.array() + g).all() &&
-            (!sensors || (tr.nhi + g >= cv.lo_n - vbox.g && tr.nlo - g <= cv.hi_n + vbox.g)))
-          kept.push(tr, static_cast<Index>(static_cast<std::size_t>(ct.triangles_at) + k), self);
+        const bool meets = (tr.lo.x() <= hi.x()) & (tr.lo.y() <= hi.y()) & (tr.lo.z() <= hi.z()) &
+                           (lo.x() <= tr.hi.x()) & (lo.y() <= tr.hi.y()) & (lo.z() <= tr.hi.z()) &
+                           (tr.nhi >= n_lo) & (tr.nlo <= n_hi);
+        if (meets) kept.push(tr, static_cast<Index>(static_cast<std::size_t>(ct.triangles_at) + k), self);
       }
-      s.hits.resize(kept.size());
-      kept.meets.resize(kept.size());
+      if (s.hits.size() < nt) s.hits.resize(nt);
       ready = true;
     }
     const KeptTriangles& kept = s.kept;
