@@ -45,10 +45,6 @@ bool overlap(const Grown& a, const Grown& b) {
   return (a.lo.array() <= b.hi.array()).all() && (b.lo.array() <= a.hi.array()).all();
 }
 
-bool inside(const Vec3& x, const Vec3& lo, const Vec3& hi, double r) {
-  return (x.array() >= lo.array() - r).all() && (x.array() <= hi.array() + r).all();
-}
-
 /// Axis along which the box is longest: the sweep axis that separates the most.
 int longestAxis(const Vec3& lo, const Vec3& hi) {
   Eigen::Index axis = 0;
@@ -149,7 +145,7 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
     const T* p = reinterpret_cast<const T*>(base + v * stride);
     if (copy != nullptr) std::copy(p, p + 3, copy + 3 * v);
     const double x = static_cast<double>(p[0]), y = static_cast<double>(p[1]), z = static_cast<double>(p[2]);
-    sum += x + y + z;
+    double s = x + y + z;  // one addition per vertex into `sum`, the loop's only chain
     MotionBox& box = boxes[c];
     box.lo = box.lo.cwiseMin(Vec3(x, y, z));
     box.hi = box.hi.cwiseMax(Vec3(x, y, z));
@@ -158,7 +154,7 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
       const T* q = reinterpret_cast<const T*>(prev + v * prev_stride);
       const Vec3 qv{static_cast<double>(q[0]), static_cast<double>(q[1]), static_cast<double>(q[2])};
       if (swept) {
-        sum += qv.sum();
+        s += qv.sum();
         q_lo = q_lo.cwiseMin(qv);
         q_hi = q_hi.cwiseMax(qv);
         box.lo = box.lo.cwiseMin(qv);
@@ -167,13 +163,14 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
       } else {
         const Vec3 d = Vec3(x, y, z) - qv;
         const double m2 = d.squaredNorm();
-        sum += m2;
+        s += m2;
         box.motion = m2 > box.motion ? m2 : box.motion;  // squared until the end of the pass
         hook.own(v, c, Vec3(x, y, z), &d);
       }
     } else {
       hook.own(v, c, Vec3(x, y, z), nullptr);
     }
+    sum += s;
     for (Index f : ch.foreign_of.row(static_cast<Index>(v))) {
       MotionBox& fb = boxes[f];
       fb.lo = fb.lo.cwiseMin(q_lo);
@@ -595,6 +592,7 @@ struct Scratch {
   std::vector<TriangleCorners> corners;
   KeptTriangles kept;
   std::vector<Index> hits;
+  std::vector<Index> picked;  ///< chunkCandidates: the vertices of a chunk pair worth probing
   /// Forgets the gathered vertex and triangle records (ChunkRef's offsets must be reset with them).
   void clearRecords() {
     verts.clear();
@@ -776,15 +774,26 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
   bool ready = false;
   Scratch& s = ctx.s;
   std::size_t probes = 0;
+  // The vertices that can meet a triangle of ct: within r of its extent along the sensor axis (the
+  // slab: a vertex farther than r from the triangle chunk's extent along n is farther than r from
+  // each of its triangles) and of its box. Most fail, so they are picked without a branch each
+  // (one per vertex would be mispredicted), then the picked ones are probed in order.
+  if (s.picked.size() < nv) s.picked.resize(nv);
+  std::size_t n_picked = 0, dropped = 0;
+  const VertexRec* recs = s.verts.data() + cv.vertices_at;
   for (std::size_t i = 0; i < nv; ++i) {
-    const VertexRec& vr = s.verts[static_cast<std::size_t>(cv.vertices_at) + i];
-    // The slab: a vertex farther than r from the triangle chunk's extent along n is farther
-    // than r from each of its triangles.
-    if (sensors && (vr.xn + vr.r < ct.lo_n || vr.xn - vr.r > ct.hi_n)) {
-      ++ctx.counters.vertices_dropped;
-      continue;
-    }
-    if (!inside(vr.x, tbox.lo, tbox.hi, vr.r)) continue;
+    const VertexRec& vr = recs[i];
+    const bool in_slab = !sensors || ((vr.xn + vr.r >= ct.lo_n) & (vr.xn - vr.r <= ct.hi_n));
+    const bool in_box = (vr.x.x() >= tbox.lo.x() - vr.r) & (vr.x.y() >= tbox.lo.y() - vr.r) &
+                        (vr.x.z() >= tbox.lo.z() - vr.r) & (vr.x.x() <= tbox.hi.x() + vr.r) &
+                        (vr.x.y() <= tbox.hi.y() + vr.r) & (vr.x.z() <= tbox.hi.z() + vr.r);
+    s.picked[n_picked] = static_cast<Index>(i);
+    n_picked += static_cast<std::size_t>(in_slab & in_box);
+    dropped += static_cast<std::size_t>(!in_slab);
+  }
+  ctx.counters.vertices_dropped += dropped;
+  for (std::size_t pick = 0; pick < n_picked; ++pick) {
+    const VertexRec& vr = recs[s.picked[pick]];
     if (!ready) {
       // Only the triangles that reach the vertex chunk's grown box can meet any of its vertices.
       gatherTriangles(ctx, ct);
