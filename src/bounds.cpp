@@ -3,12 +3,17 @@
 #include "psc/error.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
+#endif
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#define PSC_HAVE_AVX2_PATH 1
 #endif
 
 namespace psc::detail {
@@ -762,6 +767,66 @@ std::size_t collectMeets(const KeptTriangles& kept, const VertexRec& vr, double 
   return n_hits;
 }
 
+#if defined(PSC_HAVE_AVX2_PATH)
+/// collectMeets<false> four triangles per instruction, for processors with AVX2 (chosen at run
+/// time). The same operations in the same order as the SSE2 loop, without fused multiply-adds, so
+/// the same triangles pass.
+[[gnu::target("avx2")]] std::size_t collectMeetsAvx2(const KeptTriangles& kept, const VertexRec& vr, double n_lo,
+                                                     double n_hi, unsigned char* meets, Index* hits) {
+  const std::size_t m = kept.size();
+  const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
+  const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
+  const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
+  const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
+  const __m256d vx = _mm256_set1_pd(x), vy = _mm256_set1_pd(y), vz = _mm256_set1_pd(z), vr2 = _mm256_set1_pd(r2);
+  const __m256d vnl = _mm256_set1_pd(n_lo), vnh = _mm256_set1_pd(n_hi), zero = _mm256_setzero_pd();
+  std::size_t j = 0;
+  int any = 0;
+  for (; j + 4 <= m; j += 4) {
+    const __m256d dx = _mm256_max_pd(
+        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lx + j), vx), _mm256_sub_pd(vx, _mm256_loadu_pd(hx + j))));
+    const __m256d dy = _mm256_max_pd(
+        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(ly + j), vy), _mm256_sub_pd(vy, _mm256_loadu_pd(hy + j))));
+    const __m256d dz = _mm256_max_pd(
+        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lz + j), vz), _mm256_sub_pd(vz, _mm256_loadu_pd(hz + j))));
+    const __m256d d2 =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz));
+    const __m256d ok = _mm256_and_pd(
+        _mm256_cmp_pd(d2, vr2, _CMP_LE_OQ),
+        _mm256_and_pd(_mm256_cmp_pd(vnh, _mm256_loadu_pd(tnl + j), _CMP_GE_OQ),
+                      _mm256_cmp_pd(vnl, _mm256_loadu_pd(tnh + j), _CMP_LE_OQ)));
+    const int mask = _mm256_movemask_pd(ok);
+    any |= mask;
+    meets[j] = static_cast<unsigned char>(mask & 1);
+    meets[j + 1] = static_cast<unsigned char>((mask >> 1) & 1);
+    meets[j + 2] = static_cast<unsigned char>((mask >> 2) & 1);
+    meets[j + 3] = static_cast<unsigned char>(mask >> 3);
+  }
+  for (; j < m; ++j) {
+    const double dx = std::max(0.0, std::max(lx[j] - x, x - hx[j]));
+    const double dy = std::max(0.0, std::max(ly[j] - y, y - hy[j]));
+    const double dz = std::max(0.0, std::max(lz[j] - z, z - hz[j]));
+    const bool ok = dx * dx + dy * dy + dz * dz <= r2 && n_hi >= tnl[j] && n_lo <= tnh[j];
+    any |= static_cast<int>(ok);
+    meets[j] = ok;
+  }
+  if (any == 0) return 0;
+  std::size_t n_hits = 0;
+  const Index* record = kept.record.data();
+  for (std::size_t k = 0; k < m; ++k) {
+    hits[n_hits] = record[k];
+    n_hits += meets[k];
+  }
+  return n_hits;
+}
+#endif
+
+std::atomic<bool> g_avx2_allowed{true};  ///< allowAvx2Probes
+
+#if defined(PSC_HAVE_AVX2_PATH)
+bool useAvx2Probes() { return g_avx2_allowed.load(std::memory_order_relaxed) && avx2ProbesAvailable(); }
+#endif
+
 // Vertices of chunk cv (of ctx.vb) against the triangles owned by chunk ct (of ctx.tb).
 void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
   const std::size_t nt = ctx.tb.chunks.triangleCount(ct.chunk);
@@ -769,6 +834,9 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
   const bool sensors = ctx.axis.valid;
   const bool self = ctx.self_exclude2 >= 0.0;
   const MotionBox& tbox = ctx.tb.chunk_box[ct.chunk];
+#if defined(PSC_HAVE_AVX2_PATH)
+  const bool avx2 = useAvx2Probes();
+#endif
   gatherVertices(ctx, cv);
   const std::size_t nv = ctx.vb.chunks.vertices(cv.chunk).size();
   bool ready = false;
@@ -821,9 +889,15 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     const double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
     const double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
     Index* hits = s.hits.data();
-    const std::size_t n_hits =
-        self ? collectMeets<true>(kept, vr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, s.kept.meets.data(), hits)
-             : collectMeets<false>(kept, vr, n_lo, n_hi, Vec3::Zero(), 0.0, s.kept.meets.data(), hits);
+    std::size_t n_hits = 0;
+    if (self)
+      n_hits = collectMeets<true>(kept, vr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, s.kept.meets.data(), hits);
+#if defined(PSC_HAVE_AVX2_PATH)
+    else if (avx2)
+      n_hits = collectMeetsAvx2(kept, vr, n_lo, n_hi, s.kept.meets.data(), hits);
+#endif
+    else
+      n_hits = collectMeets<false>(kept, vr, n_lo, n_hi, Vec3::Zero(), 0.0, s.kept.meets.data(), hits);
     for (std::size_t h = 0; h < n_hits; ++h) {
       const Index k = hits[h];
       const TriangleCorners& tc = s.corners[k];
@@ -1207,6 +1281,17 @@ std::vector<std::vector<char>> regionsNearOtherBodies(const std::vector<Body*>& 
     }
   return near;
 }
+
+bool avx2ProbesAvailable() {
+#if defined(PSC_HAVE_AVX2_PATH)
+  static const bool has = __builtin_cpu_supports("avx2") != 0;
+  return has;
+#else
+  return false;
+#endif
+}
+
+void allowAvx2Probes(bool allowed) { g_avx2_allowed.store(allowed, std::memory_order_relaxed); }
 
 void cullAndCollect(const std::vector<Body*>& bodies, const BodyPairs& pairs, const CullParams& params,
                     std::vector<FlaggedPair>& flagged, std::vector<CandidatePair>& candidates, StepStats& counters) {

@@ -56,4 +56,11 @@ void cullAndCollect(const std::vector<Body*>& bodies, const BodyPairs& pairs, co
                     std::vector<FlaggedPair>& flagged,
                     std::vector<CandidatePair>& candidates, StepStats& stats);
 
+/// The candidate stage's box probes run four at a time with AVX2 where the processor has it
+/// (checked once), else two at a time with SSE2 (x86-64's baseline); both give the same candidates.
+/// Whether the AVX2 path exists on this processor:
+bool avx2ProbesAvailable();
+/// Allows (the default) or forbids the AVX2 path, process-wide: for the test that the two agree.
+void allowAvx2Probes(bool allowed);
+
 }  // namespace psc::detail

@@ -3,6 +3,9 @@
 
 #include "test_util.h"
 
+// Private: the switch between the candidate stage's two probe paths (Probes.* below).
+#include "../../src/bounds.h"
+
 #include "psc/error.h"
 #include "psc/repartition.h"
 #include "psc/shapes.h"
@@ -462,6 +465,43 @@ TEST(SensorDecision, ObliqueCurvedContactSameCandidatesFewerProbes) {
   EXPECT_LT(st_s.candidate_probes, st_b.candidate_probes) << "the sensors must cut probes on oblique curved contact";
   EXPECT_GT(st_s.vertices_dropped + st_s.chunks_dropped, 0u);
   EXPECT_EQ(st_b.vertices_dropped + st_b.chunks_dropped + st_b.region_pairs_separated, 0u) << "Bounds: no sensor stage";
+}
+
+// The candidate stage's two probe paths, AVX2 (four boxes at a time, where the processor has it)
+// and SSE2 (two), give the same candidates bit for bit: three bodies pressed into each other over a
+// few steps, with a motion term, in both modes that probe.
+TEST(Probes, Avx2AndSse2GiveTheSameCandidates) {
+  if (!detail::avx2ProbesAvailable()) GTEST_SKIP() << "no AVX2 on this processor: only the SSE2 path runs";
+  const auto run = [](Flagging flagging, bool avx2) {
+    detail::allowAvx2Probes(avx2);
+    SensorSettings settings;
+    settings.flagging = flagging;
+    Scene sc(settings);
+    TriMesh a = makeSphere(1.0, 900), b = makeTorus(0.8, 0.3, 900), c = makeSphere(0.6, 500);
+    b.translate(Vec3(1.85, 0.05, 0));
+    c.translate(Vec3(0.1, 1.5, 0.2));
+    sc.meshes = {a, b, c};
+    sc.registerAll(0.03);
+    std::vector<CandidatePair> candidates;
+    std::size_t probes = 0;
+    for (int s = 0; s < 6; ++s) {
+      for (Vec3& p : sc.meshes[1].vertices) p.x() -= 0.02;
+      for (Vec3& p : sc.meshes[2].vertices) p.y() -= 0.015;
+      const StepResult& r = sc.world.step();
+      candidates.insert(candidates.end(), r.candidates.begin(), r.candidates.end());
+      probes += r.stats.candidate_probes;
+    }
+    detail::allowAvx2Probes(true);
+    return std::make_pair(candidates, probes);
+  };
+  for (Flagging flagging : {Flagging::SensorsAndBounds, Flagging::Bounds}) {
+    const auto wide = run(flagging, true);
+    const auto narrow = run(flagging, false);
+    ASSERT_GT(wide.first.size(), 100u);
+    EXPECT_GT(wide.second, wide.first.size());
+    EXPECT_EQ(wide.second, narrow.second);
+    EXPECT_TRUE(wide.first == narrow.first);
+  }
 }
 
 }  // namespace
