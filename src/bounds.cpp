@@ -351,7 +351,10 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
   // per vertex, held only during this call.
   std::vector<float> copy_f;
   std::vector<double> copy_d;
-  if (measure) (is_float ? copy_f.resize(3 * ch.chunk_of.size()) : copy_d.resize(3 * ch.chunk_of.size()));
+  if (measure && is_float)
+    copy_f.resize(3 * ch.chunk_of.size());
+  else if (measure)
+    copy_d.resize(3 * ch.chunk_of.size());
   float* const cf = measure && is_float ? copy_f.data() : nullptr;
   double* const cd = measure && !is_float ? copy_d.data() : nullptr;
   rest_fit = rest_fit && !swept && b.selfCollides();
