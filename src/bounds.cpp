@@ -694,6 +694,28 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   ctx.counters.candidate_triangles += ch.triangleCount(c.chunk);
 }
 
+/// The scalar test of kept triangle j (the vector loops' tail): the vertex's ball meets its box and
+/// [n_lo, n_hi] meets its extent along the sensor axis.
+bool meetsScalar(const KeptTriangles& kept, std::size_t j, const VertexRec& vr, double n_lo, double n_hi) {
+  const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
+  const double dx = std::max(0.0, std::max(kept.lo_x[j] - x, x - kept.hi_x[j]));
+  const double dy = std::max(0.0, std::max(kept.lo_y[j] - y, y - kept.hi_y[j]));
+  const double dz = std::max(0.0, std::max(kept.lo_z[j] - z, z - kept.hi_z[j]));
+  return dx * dx + dy * dy + dz * dz <= r2 && n_hi >= kept.n_lo[j] && n_lo <= kept.n_hi[j];
+}
+
+/// Pass 2: the records of the triangles marked in `meets`, in kept order, into `hits`; returns how
+/// many (a store per triangle and no branch).
+std::size_t gatherMarked(const KeptTriangles& kept, const unsigned char* meets, Index* hits) {
+  std::size_t n_hits = 0;
+  const Index* record = kept.record.data();
+  for (std::size_t k = 0; k < kept.size(); ++k) {
+    hits[n_hits] = record[k];
+    n_hits += meets[k];
+  }
+  return n_hits;
+}
+
 /// The kept triangles whose box the vertex's ball meets and whose extent along the sensor axis
 /// meets the vertex's [n_lo, n_hi], into `hits` (their records, in kept order); returns how many.
 /// Two triangles per instruction without a branch per test: about one triangle in ten passes
@@ -708,16 +730,16 @@ std::size_t collectMeets(const KeptTriangles& kept, const VertexRec& vr, double 
                          double exclude2, unsigned char* meets, Index* hits) {
   const std::size_t m = kept.size();
   const Index* record = kept.record.data();
-  const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
-  const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
-  const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
-  const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
   const double *gx = kept.mid_x.data(), *gy = kept.mid_y.data(), *gz = kept.mid_z.data();
   std::size_t j = 0, n_hits = 0;
   int any = 0;
 #if defined(__SSE2__)
-  // SSE2 is part of x86-64; the same tests as the loop below.
+  // SSE2 is part of x86-64; the same tests as meetsScalar.
   {
+    const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
+    const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
+    const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
+    const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
     const __m128d vx = _mm_set1_pd(x), vy = _mm_set1_pd(y), vz = _mm_set1_pd(z), vr2 = _mm_set1_pd(r2);
     const __m128d vnl = _mm_set1_pd(n_lo), vnh = _mm_set1_pd(n_hi), zero = _mm_setzero_pd();
     const __m128d px = _mm_set1_pd(rest.x()), py = _mm_set1_pd(rest.y()), pz = _mm_set1_pd(rest.z());
@@ -749,10 +771,7 @@ std::size_t collectMeets(const KeptTriangles& kept, const VertexRec& vr, double 
   }
 #endif
   for (; j < m; ++j) {
-    const double dx = std::max(0.0, std::max(lx[j] - x, x - hx[j]));
-    const double dy = std::max(0.0, std::max(ly[j] - y, y - hy[j]));
-    const double dz = std::max(0.0, std::max(lz[j] - z, z - hz[j]));
-    bool ok = dx * dx + dy * dy + dz * dz <= r2 && n_hi >= tnl[j] && n_lo <= tnh[j];
+    const bool ok = meetsScalar(kept, j, vr, n_lo, n_hi);
     if constexpr (kSelf) {
       if (ok && (Vec3(gx[j], gy[j], gz[j]) - rest).squaredNorm() >= exclude2) hits[n_hits++] = record[j];
     } else {
@@ -760,13 +779,7 @@ std::size_t collectMeets(const KeptTriangles& kept, const VertexRec& vr, double 
       meets[j] = ok;
     }
   }
-  if constexpr (!kSelf) {
-    if (any == 0) return 0;
-    for (std::size_t k = 0; k < m; ++k) {
-      hits[n_hits] = record[k];
-      n_hits += meets[k];
-    }
-  }
+  if constexpr (!kSelf) return any == 0 ? 0 : gatherMarked(kept, meets, hits);
   return n_hits;
 }
 
@@ -806,21 +819,11 @@ std::size_t collectMeets(const KeptTriangles& kept, const VertexRec& vr, double 
     meets[j + 3] = static_cast<unsigned char>(mask >> 3);
   }
   for (; j < m; ++j) {
-    const double dx = std::max(0.0, std::max(lx[j] - x, x - hx[j]));
-    const double dy = std::max(0.0, std::max(ly[j] - y, y - hy[j]));
-    const double dz = std::max(0.0, std::max(lz[j] - z, z - hz[j]));
-    const bool ok = dx * dx + dy * dy + dz * dz <= r2 && n_hi >= tnl[j] && n_lo <= tnh[j];
+    const bool ok = meetsScalar(kept, j, vr, n_lo, n_hi);
     any |= static_cast<int>(ok);
     meets[j] = ok;
   }
-  if (any == 0) return 0;
-  std::size_t n_hits = 0;
-  const Index* record = kept.record.data();
-  for (std::size_t k = 0; k < m; ++k) {
-    hits[n_hits] = record[k];
-    n_hits += meets[k];
-  }
-  return n_hits;
+  return any == 0 ? 0 : gatherMarked(kept, meets, hits);
 }
 #endif
 
