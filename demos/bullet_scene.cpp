@@ -30,37 +30,42 @@ void SceneDynamicsWorld::performDiscreteCollisionDetection() {
 }
 
 void TimedSoftBodySolver::predictMotion(btScalar dt) {
-  detached_.clear();
   skipped_ = 0;
+  predict_ms_ = 0.0;
+  face_refit_ms_ = 0.0;
+  // btDefaultSoftBodySolver::predictMotion (Bullet 3.24) body by body, so that each body's face
+  // refit, and the sensors' refit (after_predict), run while its nodes are in the cache, as the
+  // face refit does inside btSoftBody::predictMotion.
   for (int i = 0; i < m_softBodySet.size(); ++i) {
     btSoftBody* psb = m_softBodySet[i];
-    // m_bUpdateRtCst: the base rebuilds the face tree this step; leave that step to Bullet.
-    if (!split_ || !psb->isActive() || psb->m_bUpdateRtCst || psb->m_fdbvt.m_root == nullptr) continue;
-    if (psb->m_pose.m_bframe && psb->m_cfg.kMT > 0) {
+    if (!psb->isActive()) continue;
+    // m_bUpdateRtCst: predictMotion rebuilds the face tree this step; leave that step to Bullet.
+    bool split = split_ && !psb->m_bUpdateRtCst && psb->m_fdbvt.m_root != nullptr;
+    if (split && psb->m_pose.m_bframe && psb->m_cfg.kMT > 0) {
       ++skipped_;
-      continue;
+      split = false;
     }
-    detached_.emplace_back(psb, psb->m_fdbvt.m_root);
-    psb->m_fdbvt.m_root = nullptr;  // btDbvt::empty() is m_root == 0: the base skips the face refit
-  }
-  const auto t0 = std::chrono::steady_clock::now();
-  btDefaultSoftBodySolver::predictMotion(dt);
-  const auto t1 = std::chrono::steady_clock::now();
-  // The same refit as btSoftBody::predictMotion (Bullet 3.24), with the state it left in m_sst.
-  for (auto& [psb, root] : detached_) {
-    psb->m_fdbvt.m_root = root;
-    ATTRIBUTE_ALIGNED16(btDbvtVolume) vol;
-    for (int f = 0; f < psb->m_faces.size(); ++f) {
-      btSoftBody::Face& face = psb->m_faces[f];
-      const btVector3 v = (face.m_n[0]->m_v + face.m_n[1]->m_v + face.m_n[2]->m_v) / 3;
-      vol = VolumeOf(face, psb->m_sst.radmrg);
-      psb->m_fdbvt.update(face.m_leaf, vol, v * psb->m_sst.velmrg, psb->m_sst.updmrg);
+    btDbvtNode* root = psb->m_fdbvt.m_root;
+    if (split) psb->m_fdbvt.m_root = nullptr;  // btDbvt::empty() is m_root == 0: predictMotion skips the face refit
+    const auto t0 = std::chrono::steady_clock::now();
+    psb->predictMotion(dt);
+    const auto t1 = std::chrono::steady_clock::now();
+    predict_ms_ += msSince(t0, t1);
+    if (split) {
+      // The same refit as btSoftBody::predictMotion (Bullet 3.24), with the state it left in m_sst.
+      psb->m_fdbvt.m_root = root;
+      ATTRIBUTE_ALIGNED16(btDbvtVolume) vol;
+      for (int f = 0; f < psb->m_faces.size(); ++f) {
+        btSoftBody::Face& face = psb->m_faces[f];
+        const btVector3 v = (face.m_n[0]->m_v + face.m_n[1]->m_v + face.m_n[2]->m_v) / 3;
+        vol = VolumeOf(face, psb->m_sst.radmrg);
+        psb->m_fdbvt.update(face.m_leaf, vol, v * psb->m_sst.velmrg, psb->m_sst.updmrg);
+      }
+      psb->m_fdbvt.optimizeIncremental(1);
+      face_refit_ms_ += msSince(t1, std::chrono::steady_clock::now());
     }
-    psb->m_fdbvt.optimizeIncremental(1);
+    if (after_predict_) after_predict_(*psb);
   }
-  const auto t2 = std::chrono::steady_clock::now();
-  predict_ms_ = msSince(t0, t1);
-  face_refit_ms_ = msSince(t1, t2);
 }
 
 void TimedSoftBodySolver::solveConstraints(btScalar dt) {

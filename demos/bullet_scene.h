@@ -35,11 +35,15 @@ class SceneDynamicsWorld : public btSoftRigidDynamicsWorld {
 
 class TimedSoftBodySolver : public btDefaultSoftBodySolver {
  public:
-  /// Face trees are detached during the base predictMotion and refit afterwards with the same
-  /// code, timed. Equivalent to Bullet's order as long as no body uses frame pose matching
-  /// (kMT with setPose(…, true)), which moves nodes between the two refits; bodies that do are
-  /// left to Bullet and their face refit is not split off (counted in faceRefitSkipped()).
+  /// Body by body: the face tree is detached during btSoftBody::predictMotion and refit right
+  /// after it with the same code, timed, while the body's nodes are in the cache; then
+  /// setAfterPredict's hook. Equivalent to Bullet's order as long as no body uses frame pose
+  /// matching (kMT with setPose(…, true)), which moves nodes between the two refits; bodies that
+  /// do are left to Bullet and their face refit is not split off (counted in faceRefitSkipped()).
   void predictMotion(btScalar dt) override;
+  /// Called right after each body's predictMotion (and its face refit): the sensor pipeline's
+  /// psc::bullet::Plugin::afterPredictMotion, as psc::bullet::SoftBodySolver does it.
+  void setAfterPredict(std::function<void(const btSoftBody&)> hook) { after_predict_ = std::move(hook); }
   /// false: plain btDefaultSoftBodySolver behaviour (for the test that the split changes nothing).
   void setSplit(bool split) { split_ = split; }
   double lastFaceRefitMs() const { return face_refit_ms_; }
@@ -59,7 +63,7 @@ class TimedSoftBodySolver : public btDefaultSoftBodySolver {
   std::size_t lastSelfClusterContacts() const { return self_cluster_contacts_; }  ///< joints it made
 
  private:
-  std::vector<std::pair<btSoftBody*, btDbvtNode*>> detached_;
+  std::function<void(const btSoftBody&)> after_predict_;
   double face_refit_ms_ = 0.0;
   double predict_ms_ = 0.0;
   std::size_t skipped_ = 0;

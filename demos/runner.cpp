@@ -344,7 +344,7 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
     : scene_(scene), pipeline_(pipeline), opt_(opt), world_(scene, worldOptions(pipeline, opt)) {
   if (pipeline != Pipeline::Bullet)
     sensors_ = std::make_unique<SensorPipeline>(world_, coreFlagging(pipeline, opt.flagging), opt.exact,
-                                                opt.self_collision);
+                                                opt.self_collision, opt.refit_after_predict);
   truth_settings_.strict = strict;
   truth_settings_.full = full;
   world_.world().before_collision = [this] {

@@ -73,6 +73,9 @@ struct RunOptions {
   /// Self-collision on every body of our pipelines (psc::bullet::Settings::self_collision), and the
   /// self truth for every pipeline. Bullet's own pipeline has none and stays as it is.
   bool self_collision = false;
+  /// Our pipelines refit each body right after its predictMotion, nodes warm (SensorPipeline);
+  /// false (--refit-in-step): in the sensor step, as a plugin without the solver hook does.
+  bool refit_after_predict = true;
   /// > 0: a Bullet cluster run (only with Pipeline::Bullet): generateClusters(bullet_clusters) on
   /// every body; CL_SS | CL_SELF as Bullet documents it, or with cluster_self_direct CL_SS and the
   /// cluster self-collision called directly (TimedSoftBodySolver::setCallClusterSelf).

@@ -24,7 +24,7 @@ bool SensorPipeline::available() { return true; }
 int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
 
 SensorPipeline::SensorPipeline(SceneWorld& world, psc::Flagging flagging, const std::string& exact,
-                               bool self_collision) {
+                               bool self_collision, bool refit_after_predict) {
   psc::bullet::Settings settings;
   settings.opt_in = psc::bullet::OptIn::Explicit;
   settings.sensors.flagging = flagging;
@@ -32,6 +32,10 @@ SensorPipeline::SensorPipeline(SceneWorld& world, psc::Flagging flagging, const 
   settings.exact = psc::bullet::exactTestFromString(exact);
   impl_ = std::make_shared<Impl>(world, psc::bullet::install(world.world(), settings));
   for (btSoftBody* body : world.softBodies()) impl_->plugin.setEnabled(body, true);
+  if (refit_after_predict) {
+    psc::bullet::Plugin* plugin = &impl_->plugin;  // Impl is not moved: the world holds it until its end
+    world.softSolver().setAfterPredict([plugin](const btSoftBody& body) { plugin->afterPredictMotion(body); });
+  }
   // The world destroys its attachments before its bodies and itself: the plugin must go first.
   world.attach(impl_);
 }
@@ -118,7 +122,7 @@ SensorView SensorPipeline::view() const {
 struct SensorPipeline::Impl {};
 bool SensorPipeline::available() { return false; }
 int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
-SensorPipeline::SensorPipeline(SceneWorld&, psc::Flagging, const std::string&, bool) {
+SensorPipeline::SensorPipeline(SceneWorld&, psc::Flagging, const std::string&, bool, bool) {
   throw Error(ErrorCode::InvalidArgument, "this psc_demo was built without psc::bullet: use --pipeline bullet");
 }
 SensorPipeline::~SensorPipeline() = default;

@@ -251,6 +251,9 @@ struct Body {
   std::vector<MotionBox> region_box;
   MotionBox body_box;
   ShapeFigures shape;  ///< filled by refitBounds(b, true)
+  /// SensorWorld::refitNow refit the boxes for the coming step(), which then skips the body's refit;
+  /// anything that changes what the refit reads (positions, self-collision) clears it.
+  bool refit_ahead = false;
 
   std::string label() const { return name.empty() ? "body #" + std::to_string(id) : "body '" + name + "'"; }
   std::size_t regionCount() const { return particle_vertex.size(); }

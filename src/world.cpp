@@ -33,6 +33,8 @@ struct SensorWorld::Impl {
   BodyId next_id = 0;
   bool membership_changed = false;
   StepResult result;
+  /// What refitNow() did since the last step: its refit and repartition figures join the step's.
+  StepStats ahead;
 
   // Particle arrays for one step, ordered by (body id, region).
   detail::Particles particles;
@@ -399,6 +401,7 @@ void SensorWorld::setPositions(BodyId id, const PositionView& positions, const P
                                                 std::to_string(positions.size()));
   b.positions = positions;
   b.previous = previous;
+  b.refit_ahead = false;
 }
 
 void SensorWorld::setMargin(BodyId id, double margin) {
@@ -413,6 +416,7 @@ void SensorWorld::setSelfCollision(BodyId id, bool on) {
   if (on) checkFinite(b.positions, b.label());
   b.rest = on ? restShape(b.positions) : std::vector<Vec3>{};
   b.rest_fit.reset();
+  b.refit_ahead = false;
   b.rest_mean_edge = on ? edgeStats(b.fullTopology(), b.positions).mean : 0.0;
 }
 
@@ -445,6 +449,17 @@ void SensorWorld::replaceMesh(BodyId id, std::vector<Triangle> triangles, const 
   impl_->membership_changed = true;
 }
 
+bool SensorWorld::refitNow(BodyId id) {
+  Impl& w = *impl_;
+  Body& b = w.get(id);
+  // A new body or a changed membership: step() partitions first (and a partition refits itself).
+  if (!b.partitioned || w.membership_changed) return false;
+  b.refit_ahead = false;
+  w.refitAndCheck(b, w.ahead);  // throws for a non-finite vertex; step() then refits and throws again
+  b.refit_ahead = true;
+  return true;
+}
+
 const StepResult& SensorWorld::step() {
   Impl& w = *impl_;
   const auto t_start = Clock::now();
@@ -461,7 +476,18 @@ const StepResult& SensorWorld::step() {
   auto t = Clock::now();
   w.preparePartitions(st);
   st.ms_repartition = msSince(t);
-  for (auto& kv : w.bodies) w.refitAndCheck(*kv.second, st);
+  for (auto& kv : w.bodies) {
+    Body& b = *kv.second;
+    if (b.refit_ahead)
+      b.refit_ahead = false;  // refitNow() did it, closer to where the positions were written
+    else
+      w.refitAndCheck(b, st);
+  }
+  st.ms_refit += w.ahead.ms_refit;
+  st.ms_repartition += w.ahead.ms_repartition;
+  st.repartitions += w.ahead.repartitions;
+  const double ms_ahead = w.ahead.ms_refit + w.ahead.ms_repartition;  // counted in ms_total too
+  w.ahead = StepStats{};
 
   st.bodies = w.bodies.size();
   std::vector<Body*> ordered;
@@ -494,7 +520,7 @@ const StepResult& SensorWorld::step() {
   }
   st.particles = ps.size();
   if (st.particles == 0) {
-    st.ms_total = msSince(t_start);
+    st.ms_total = msSince(t_start) + ms_ahead;
     return res;
   }
   const double r_eff = w.rEff();
@@ -532,7 +558,7 @@ const StepResult& SensorWorld::step() {
     if (f.by_sensors) ++st.flagged_by_sensors;
     else ++st.flagged_by_bounds_only;
   }
-  st.ms_total = msSince(t_start);
+  st.ms_total = msSince(t_start) + ms_ahead;
   return res;
 }
 

@@ -179,6 +179,13 @@ std::optional<psc::BodyId> BodyRegistry::idOf(const btSoftBody* body) const {
   return it->second.id;
 }
 
+std::optional<psc::BodyId> BodyRegistry::currentIdOf(const btSoftBody& body) const {
+  const auto it = records_.find(&body);
+  if (it == records_.end() || it->second.id == psc::kInvalidBody || dirty_.count(&body) != 0) return std::nullopt;
+  if (!fingerprintOf(body).same(it->second.print)) return std::nullopt;
+  return it->second.id;
+}
+
 btSoftBody* BodyRegistry::bodyOf(psc::BodyId id) const {
   const auto it = bodies_.find(id);
   return it == bodies_.end() ? nullptr : it->second;

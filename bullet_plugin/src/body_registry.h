@@ -35,6 +35,10 @@ class BodyRegistry {
             psc::SensorWorld& sensors, SyncCounters& counters, std::vector<const btSoftBody*>& left);
 
   std::optional<psc::BodyId> idOf(const btSoftBody* body) const;
+  /// The body's id when the sensor world's view of it is still current (same proxy, node and face
+  /// buffers and counts as at the last sync, not marked dirty): what the next sync would leave as
+  /// it is. Nothing otherwise.
+  std::optional<psc::BodyId> currentIdOf(const btSoftBody& body) const;
   /// The body behind a sensor id, as of the last sync (valid until the world's bodies change).
   btSoftBody* bodyOf(psc::BodyId id) const;
   /// Re-read the body's triangles at the next sync.
@@ -52,6 +56,7 @@ class BodyRegistry {
     bool sameMesh(const Fingerprint& o) const {
       return node_count == o.node_count && faces == o.faces && face_count == o.face_count;
     }
+    bool same(const Fingerprint& o) const { return sameBody(o) && sameMesh(o) && nodes == o.nodes; }
   };
   struct Record {
     Fingerprint print;

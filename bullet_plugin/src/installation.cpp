@@ -3,6 +3,7 @@
 #include "dispatcher_access.h"
 #include "exact_stage.h"
 #include "psc/error.h"
+#include "psc/bullet/solver.h"
 
 #include <BulletCollision/BroadphaseCollision/btOverlappingPairCache.h>
 #include <BulletCollision/CollisionDispatch/btCollisionDispatcher.h>
@@ -119,6 +120,7 @@ Installation::Installation(btSoftRigidDynamicsWorld& world, const Settings& sett
 }
 
 Installation::~Installation() {
+  if (solver_ != nullptr) detach(*solver_);
   // Give back the previous algorithm only if nobody registered over ours meanwhile.
   if (detail::DispatcherAccess::contactCreateFunc(dispatcher_, kSoft, kSoft) == &create_func_)
     dispatcher_.registerCollisionCreateFunc(kSoft, kSoft, previous_);
@@ -202,6 +204,37 @@ void Installation::endOfDispatch() noexcept {
   }
 }
 
+void Installation::afterPredictMotion(const btSoftBody& body) noexcept {
+  std::lock_guard<std::mutex> lock(mutex_);
+  // Only a body the next sync will leave as it is: a new, changed or re-meshed one is refit by the
+  // sensor step after the sync. The step is the one that tells the user about a failure.
+  // (Bullet resets m_stepCount only after predictMotion, so sensedThisStep() cannot tell here
+  // whether this step's sensors have run: the call's place is the caller's contract.)
+  if (!participates(body)) return;
+  const std::optional<psc::BodyId> id = registry_.currentIdOf(body);
+  if (!id) return;
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    if (sensors_.refitNow(*id)) ++ahead_bodies_;
+  } catch (...) {
+    // A non-finite node: the sensor step refits the body again and reports it (Stats::error).
+  }
+  ahead_ms_ += millisecondsSince(start);
+}
+
+void Installation::attach(SoftBodySolver& solver) {
+  if (solver.installation_ == this) return;
+  if (solver.installation_ != nullptr) solver.installation_->detach(solver);
+  if (solver_ != nullptr) detach(*solver_);
+  solver.installation_ = this;
+  solver_ = &solver;
+}
+
+void Installation::detach(SoftBodySolver& solver) {
+  if (solver.installation_ == this) solver.installation_ = nullptr;
+  if (solver_ == &solver) solver_ = nullptr;
+}
+
 void Installation::collideUndispatchedPairs() {
   const std::vector<psc::CandidatePair>& candidates = sensors_.lastResult().candidates;
   btOverlappingPairCache* cache = world_.getBroadphase()->getOverlappingPairCache();
@@ -281,6 +314,10 @@ void Installation::senseOncePerStep() {
   const std::uint64_t sensor_steps = stats_.sensor_steps + 1;
   stats_ = Stats{};
   stats_.sensor_steps = sensor_steps;
+  stats_.refit_after_predict = ahead_bodies_;
+  const double ahead_ms = ahead_ms_;
+  ahead_bodies_ = 0;
+  ahead_ms_ = 0.0;
   step_ok_ = false;
   const auto start = std::chrono::steady_clock::now();
   try {
@@ -306,7 +343,7 @@ void Installation::senseOncePerStep() {
   } catch (const std::exception& error) {
     stats_.error = error.what();
   }
-  stats_.ms_sensor_step = millisecondsSince(start);
+  stats_.ms_sensor_step = millisecondsSince(start) + ahead_ms;
 }
 
 void Installation::setEnabled(const btSoftBody* body, std::optional<bool> enabled) {

@@ -23,6 +23,7 @@ class btCollisionDispatcher;
 namespace psc::bullet {
 
 class Installation;
+class SoftBodySolver;
 
 /// The end of each simulation step's collision dispatch. Bullet calls actions in updateActions(),
 /// on every internal (sub)step, after the dispatch and before the soft bodies are solved
@@ -56,6 +57,11 @@ class Installation {
   /// Called by EndOfDispatch after the dispatch: steps the sensors if no soft-soft pair did, and
   /// (Settings::beyond_broadphase) collides the candidate pairs the broadphase did not dispatch.
   void endOfDispatch() noexcept;
+  /// Plugin::afterPredictMotion: the body's refit now, while its nodes are in the cache. Never throws.
+  void afterPredictMotion(const btSoftBody& body) noexcept;
+  /// Plugin::attach; detach is also called by the solver's destructor.
+  void attach(SoftBodySolver& solver);
+  void detach(SoftBodySolver& solver);
 
   // --- Plugin's API ---
   void setEnabled(const btSoftBody* body, std::optional<bool> enabled);
@@ -102,6 +108,9 @@ class Installation {
   bool step_ok_ = false;
   std::unordered_set<std::uint64_t> collided_pairs_;  ///< body-id pairs collided in this step
   Stats stats_;
+  SoftBodySolver* solver_ = nullptr;  ///< attached (Plugin::attach)
+  double ahead_ms_ = 0.0;            ///< afterPredictMotion's time since the last sensor step
+  std::size_t ahead_bodies_ = 0;     ///< bodies it refit since then
   std::atomic<long> live_algorithms_{0};
 };
 

@@ -3,6 +3,7 @@
 #include "installation.h"
 #include "precision_guard.h"
 #include "psc/error.h"
+#include "psc/bullet/solver.h"
 
 #include <cassert>
 #include <utility>
@@ -35,6 +36,29 @@ bool Plugin::participates(const btSoftBody* body) const {
 
 void Plugin::refreshBody(const btSoftBody* body) {
   if (impl_) impl_->refreshBody(body);
+}
+
+void Plugin::afterPredictMotion(const btSoftBody& body) {
+  if (impl_) impl_->afterPredictMotion(body);
+}
+
+void Plugin::attach(SoftBodySolver& solver) {
+  if (!impl_) throw psc::Error(psc::ErrorCode::InvalidArgument, "psc::bullet::Plugin::attach: not installed");
+  impl_->attach(solver);
+}
+
+SoftBodySolver::~SoftBodySolver() {
+  if (installation_ != nullptr) installation_->detach(*this);
+}
+
+void SoftBodySolver::predictMotion(btScalar dt) {
+  // btDefaultSoftBodySolver::predictMotion in Bullet 3.24: every active body, in the set's order.
+  for (int i = 0; i < m_softBodySet.size(); ++i) {
+    btSoftBody* body = m_softBodySet[i];
+    if (!body->isActive()) continue;
+    body->predictMotion(dt);
+    if (installation_ != nullptr) installation_->afterPredictMotion(*body);
+  }
 }
 
 const Stats& Plugin::stats() const {

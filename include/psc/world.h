@@ -103,11 +103,11 @@ struct StepStats {
   std::size_t repartitions = 0;            ///< bodies re-partitioned this step
   double r_eff = 0.0;                      ///< R_eff used this step (length units)
   double ms_sensors = 0.0;                 ///< particle movement (wall clock)
-  double ms_refit = 0.0;                   ///< refit of the body / region / chunk boxes
+  double ms_refit = 0.0;                   ///< refit of the body / region / chunk boxes (with refitNow's since the last step)
   double ms_flagging = 0.0;                ///< pairing bodies and regions, the sensors' decisions
   double ms_candidates = 0.0;              ///< candidate pairs
   double ms_repartition = 0.0;             ///< repartition checks and repartitions
-  double ms_total = 0.0;
+  double ms_total = 0.0;                   ///< the step, plus refitNow's refits and checks since the last one
 };
 
 struct StepResult {
@@ -152,6 +152,18 @@ class SensorWorld {
   /// The mesh itself changed (vertex count, triangles): rebuilds the topology and repartitions.
   void replaceMesh(BodyId id, std::vector<Triangle> triangles, const PositionView& positions,
                    const PositionView& previous = {});
+
+  /// Optional: refits the body's boxes for the coming step() now, and step() does not refit it
+  /// again. Call it right after the owner wrote the body's positions for the step (e.g. right after
+  /// Bullet's btSoftBody::predictMotion), while they are still in the cache: the refit is the one
+  /// stage that reads every vertex, and reading them cold costs about three times as much. The
+  /// positions must not change between this call and step(); setPositions(), setSelfCollision()
+  /// and replaceMesh() cancel it (step() then refits as usual). Returns false, doing nothing, for
+  /// a body step() has not partitioned yet or when bodies were added or removed since the last
+  /// step (step() refits those itself). Throws like step() for a non-finite position, in which case
+  /// step() refits the body again. The body's repartition check rides on this refit as on step()'s;
+  /// the time and counts go into the next step's StepStats (ms_refit, ms_repartition).
+  bool refitNow(BodyId id);
 
   /// Moves the particles until stable, flags region pairs, builds candidate pairs, and checks
   /// whether bodies need repartitioning. Deterministic.

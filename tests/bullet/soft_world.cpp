@@ -13,9 +13,10 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 }  // namespace
 
-SoftWorld::SoftWorld(double gravity, const DispatcherFactory& make_dispatcher)
+SoftWorld::SoftWorld(double gravity, const DispatcherFactory& make_dispatcher, bool psc_solver)
     : own_dispatcher_(make_dispatcher ? make_dispatcher(&config) : std::make_unique<btCollisionDispatcher>(&config)),
-      dispatcher(*own_dispatcher_) {
+      dispatcher(*own_dispatcher_),
+      psc_solver_(psc_solver) {
   world.setGravity(btVector3(0, btScalar(gravity), 0));
   world.getWorldInfo().m_gravity.setValue(0, btScalar(gravity), 0);
   world.getWorldInfo().m_sparsesdf.Initialize();

@@ -1,6 +1,7 @@
 // A btSoftRigidDynamicsWorld with the bodies it owns, and the small scenes the tests share.
 #pragma once
 
+#include "psc/bullet/solver.h"
 #include "psc/shapes.h"
 
 #include <BulletCollision/CollisionDispatch/btCollisionDispatcher.h>
@@ -34,8 +35,9 @@ using DispatcherFactory = std::function<std::unique_ptr<btCollisionDispatcher>(b
 
 class SoftWorld {
  public:
-  /// `make_dispatcher` empty: a plain btCollisionDispatcher.
-  explicit SoftWorld(double gravity = -10.0, const DispatcherFactory& make_dispatcher = {});
+  /// `make_dispatcher` empty: a plain btCollisionDispatcher. `psc_solver`: the world's soft-body
+  /// solver is `soft_solver` (psc::bullet::SoftBodySolver) instead of Bullet's default.
+  explicit SoftWorld(double gravity = -10.0, const DispatcherFactory& make_dispatcher = {}, bool psc_solver = false);
   ~SoftWorld();
   SoftWorld(const SoftWorld&) = delete;
   SoftWorld& operator=(const SoftWorld&) = delete;
@@ -62,7 +64,13 @@ class SoftWorld {
   btCollisionDispatcher& dispatcher;
   btDbvtBroadphase broadphase;
   btSequentialImpulseConstraintSolver solver;
-  btSoftRigidDynamicsWorld world{&dispatcher, &broadphase, &solver, &config};
+  psc::bullet::SoftBodySolver soft_solver;  ///< the world's only with `psc_solver`
+
+ private:
+  bool psc_solver_;  // declared before `world`, which reads it
+
+ public:
+  btSoftRigidDynamicsWorld world{&dispatcher, &broadphase, &solver, &config, psc_solver_ ? &soft_solver : nullptr};
 
  private:
   static void tick(btDynamicsWorld* world, btScalar);

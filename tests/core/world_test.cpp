@@ -287,6 +287,98 @@ TEST(World, DeterministicBitForBit) {
   EXPECT_EQ(std::get<3>(r1), std::get<3>(r2));
 }
 
+// Two bodies closing in while the first stretches (so the repartition checks, which ride on the
+// refit, fire on the way), with previous positions (the motion term). `ahead`: refitNow for every
+// body before each step, as a physics engine's solver hook does. Returns everything step() gave.
+struct RefitTrace {
+  std::vector<std::vector<CandidatePair>> candidates;
+  std::vector<std::vector<FlaggedPair>> flagged;
+  std::vector<std::size_t> repartitions;
+  std::size_t refit_now_true = 0;
+};
+
+RefitTrace runRefitScene(bool ahead) {
+  SensorSettings s;
+  s.repartition.check_every = 3;
+  Scene sc(s);
+  TriMesh a = makeSphere(1.0, 900), b = makeTorus(0.8, 0.3, 900);
+  b.translate(Vec3(2.3, 0.1, 0));
+  sc.meshes = {a, b, a, b};  // 2 and 3: the previous positions of 0 and 1
+  std::vector<BodyId> ids;
+  for (std::size_t i = 0; i < 2; ++i) {
+    BodyDesc d;
+    d.triangles = sc.meshes[i].triangles;
+    d.positions = PositionView::of(sc.meshes[i].vertices);
+    d.previous = PositionView::of(sc.meshes[i + 2].vertices);
+    d.margin = 0.02;
+    ids.push_back(sc.world.addBody(d));
+  }
+  RefitTrace t;
+  EXPECT_FALSE(sc.world.refitNow(ids[0])) << "a body step() has not partitioned yet";
+  const std::vector<Vec3> rest = sc.meshes[0].vertices;
+  for (int step = 0; step < 24; ++step) {
+    for (std::size_t i = 0; i < 2; ++i) sc.meshes[i + 2].vertices = sc.meshes[i].vertices;
+    for (std::size_t v = 0; v < rest.size(); ++v)
+      sc.meshes[0].vertices[v] = Vec3(rest[v].x() * (1.0 + 0.04 * step), rest[v].y(), rest[v].z());
+    for (Vec3& p : sc.meshes[1].vertices) p.x() -= 0.02;
+    if (ahead) {
+      for (BodyId id : ids) t.refit_now_true += sc.world.refitNow(id) ? 1 : 0;
+    }
+    const StepResult& r = sc.world.step();
+    t.candidates.push_back(r.candidates);
+    t.flagged.push_back(r.flagged);
+    t.repartitions.push_back(r.stats.repartitions);
+  }
+  return t;
+}
+
+TEST(RefitNow, SameResultsAsTheStepsOwnRefit) {
+  const RefitTrace in_step = runRefitScene(false);
+  const RefitTrace ahead = runRefitScene(true);
+  EXPECT_EQ(ahead.refit_now_true, 2u * 23u) << "every step after the first refits both bodies ahead";
+  std::size_t candidates = 0, repartitions = 0;
+  for (std::size_t s = 0; s < in_step.candidates.size(); ++s) {
+    EXPECT_TRUE(in_step.candidates[s] == ahead.candidates[s]) << "step " << s;
+    EXPECT_TRUE(in_step.flagged[s] == ahead.flagged[s]) << "step " << s;
+    EXPECT_EQ(in_step.repartitions[s], ahead.repartitions[s]) << "step " << s;
+    candidates += in_step.candidates[s].size();
+    repartitions += in_step.repartitions[s];
+  }
+  EXPECT_GT(candidates, 100u) << "the bodies must meet, or the comparison proves little";
+  EXPECT_GE(repartitions, 1u) << "the stretch must repartition, so that the checks are compared too";
+}
+
+TEST(RefitNow, NewPositionsCancelIt) {
+  // refitNow, then the owner hands over other memory with the bodies in contact: step() must
+  // refit from the new positions, not keep the boxes of the old ones (which are far apart).
+  auto run = [](bool ahead) {
+    Scene sc;
+    TriMesh a = makeSphere(1.0, 600), far = makeSphere(1.0, 600), near = makeSphere(1.0, 600);
+    far.translate(Vec3(5.0, 0, 0));
+    near.translate(Vec3(1.99, 0, 0));
+    sc.meshes = {a, far, near};
+    std::vector<BodyId> ids;
+    for (std::size_t i = 0; i < 2; ++i) {
+      BodyDesc d;
+      d.triangles = sc.meshes[i].triangles;
+      d.positions = PositionView::of(sc.meshes[i].vertices);
+      d.margin = 0.02;
+      ids.push_back(sc.world.addBody(d));
+    }
+    sc.world.step();
+    if (ahead) {
+      EXPECT_TRUE(sc.world.refitNow(ids[1]));
+    }
+    sc.world.setPositions(ids[1], PositionView::of(sc.meshes[2].vertices));
+    return sc.world.step().candidates;
+  };
+  const std::vector<CandidatePair> plain = run(false);
+  EXPECT_GT(plain.size(), 0u);
+  EXPECT_TRUE(run(true) == plain);
+  SensorWorld empty;
+  EXPECT_THROW(empty.refitNow(7), Error);
+}
+
 // Runs `steps` steps with `deform` applied to body 0 before each; returns its repartition count.
 std::size_t repartitionsAfter(AreaEstimator est, const std::function<void(std::vector<Vec3>&, int)>& deform) {
   SensorSettings s;

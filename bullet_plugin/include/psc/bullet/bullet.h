@@ -5,4 +5,5 @@
 #include "psc/bullet/plugin.h"
 #include "psc/bullet/precision.h"
 #include "psc/bullet/settings.h"
+#include "psc/bullet/solver.h"
 #include "psc/bullet/stats.h"

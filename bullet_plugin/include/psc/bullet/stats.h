@@ -55,7 +55,11 @@ struct Stats {
   /// A warning for the first runaway pair this step, naming the two bodies (their indices in the
   /// world's soft body array) and the contact count; empty when there was none.
   std::string runaway;
-  double ms_sensor_step = 0.0;        ///< body synchronisation + SensorWorld::step(), wall clock
+  /// Bodies refit right after their btSoftBody::predictMotion (Plugin::afterPredictMotion, which
+  /// psc::bullet::SoftBodySolver calls) instead of in the sensor step.
+  std::size_t refit_after_predict = 0;
+  /// Body synchronisation + SensorWorld::step() + the refits done after predictMotion, wall clock.
+  double ms_sensor_step = 0.0;
   double ms_exact = 0.0;              ///< the exact stage, summed over the step's pairs, wall clock
   /// Non-empty when the core rejected this step (e.g. a non-finite node position): every pair then
   /// went to Bullet's previous algorithm instead. Never thrown through Bullet's dispatch.
