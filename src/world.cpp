@@ -169,7 +169,11 @@ void SensorWorld::Impl::refitAndCheck(Body& b, StepStats& stats) {
   if (!check) return;
   t = Clock::now();
   b.steps_since_check = 0;
-  bool trigger = rs.edge_stretch_trigger > 0.0 && b.shape.max_edge > rs.edge_stretch_trigger * b.max_edge;
+  // The edge trigger refreshes μ, which decides only in the thesis's flag-only mode: the default
+  // midphase's boxes and distances do not depend on it, and there a repartition for one stretched
+  // edge changed nothing but cost (about 40 ms per 50,000-vertex body; docs/METHOD.md §7).
+  bool trigger = settings.flagging == Flagging::Sensors && rs.edge_stretch_trigger > 0.0 &&
+                 b.shape.max_edge > rs.edge_stretch_trigger * b.max_edge;
   if (!trigger) {
     const std::vector<double> areas =
         rs.estimator == AreaEstimator::TrueArea

@@ -46,7 +46,8 @@ struct RepartitionSettings {
   int check_every = 10;                ///< steps between checks of a body (≥ 1)
   double area_trigger = 1.5;           ///< repartition when a region's area > area_trigger × A* (≥ 1; thesis: 1)
   double edge_stretch_trigger = 1.5;   ///< [beyond] ... or the longest edge > trigger × its length at
-                                       ///< partitioning (≥ 1; 0 = off); also refreshes μ
+                                       ///< partitioning (≥ 1; 0 = off); also refreshes μ. Only in
+                                       ///< Flagging::Sensors, the one mode where μ decides
 };
 
 struct SensorSettings {
