@@ -205,7 +205,10 @@ const std::vector<Index>& SensorWorld::Impl::ringOf(std::size_t particle, const 
 
 void SensorWorld::Impl::moveParticles(StepStats& stats, double r_eff) {
   const std::size_t n = particles.pos.size();
-  double slack = 0.0;  // a candidate vertex lies up to one (stretched) edge from its particle
+  // A candidate vertex lies up to one (stretched) edge from its particle. Outside the thesis's mode
+  // no edge trigger holds edges below that stretch: a longer edge only makes a hop miss a puller,
+  // and the default midphase's decisions hold whatever the particles' places.
+  double slack = 0.0;
   for (const auto& kv : bodies) slack = std::max(slack, kv.second->max_edge);
   slack *= std::max(1.0, settings.repartition.edge_stretch_trigger);
   const double reach = r_eff + slack;

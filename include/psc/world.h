@@ -156,7 +156,8 @@ class SensorWorld {
   /// Optional: refits the body's boxes for the coming step() now, and step() does not refit it
   /// again. Call it right after the owner wrote the body's positions for the step (e.g. right after
   /// Bullet's btSoftBody::predictMotion), while they are still in the cache: the refit is the one
-  /// stage that reads every vertex, and reading them cold costs about three times as much. The
+  /// stage that reads every vertex (on 8 Bullet bodies of 50,000 vertices it took 5.4 ms a step
+  /// this way against 6.3 ms in step(), after the other bodies had pushed them out). The
   /// positions must not change between this call and step(); setPositions(), setSelfCollision()
   /// and replaceMesh() cancel it (step() then refits as usual). Returns false, doing nothing, for
   /// a body step() has not partitioned yet or when bodies were added or removed since the last
