@@ -281,6 +281,18 @@ TEST(Scenes, HeadOnMeasurementChain) {
   }
   EXPECT_EQ(sensors.flagging, "default");
   EXPECT_EQ(bounds.flagging, "bounds");
+
+  // --refit-in-step: the refit moves back into the sensor step; contacts and tests stay the same.
+  RunOptions o;
+  o.steps = 40;
+  o.refit_after_predict = false;
+  const RunResult in_step = runPipeline(scene, Pipeline::Sensors, o);
+  ASSERT_EQ(in_step.per_step.size(), sensors.per_step.size());
+  for (std::size_t i = 0; i < sensors.per_step.size(); ++i) {
+    EXPECT_EQ(in_step.per_step[i].n.contacts_found, sensors.per_step[i].n.contacts_found) << "step " << i;
+    EXPECT_EQ(in_step.per_step[i].n.exact_tests, sensors.per_step[i].n.exact_tests) << "step " << i;
+  }
+  expectTimesConsistent(in_step);
 }
 
 }  // namespace
