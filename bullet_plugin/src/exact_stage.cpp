@@ -1,5 +1,7 @@
 #include "exact_stage.h"
 
+#include "vf_lanes.h"
+
 #include "psc/bullet/exact.h"
 #include "psc/error.h"
 
@@ -241,12 +243,105 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
   return collideCandidates(test, node_body, face_body, marginSum(node_body, face_body), first, last);
 }
 
+namespace {
+
+/// Bullet's and Robust's exact stage eight candidates at a time (detail::vfLanes), in candidate
+/// order; a lane the kernel cannot decide runs the scalar test, as does the tail.
+void collideInLanes(bool robust, const PairContext& ctx, btSoftBody& node_body, btSoftBody& face_body,
+                    const psc::CandidatePair* first, const psc::CandidatePair* last, ExactCounts& counts) {
+  static_assert(sizeof(btScalar) == sizeof(float), "the lanes are single precision");
+  namespace d = detail;
+  const btSoftBody::Node* nodes = &node_body.m_nodes[0];
+  const btSoftBody::Face* faces = &face_body.m_faces[0];
+  const btScalar friction = btMax(node_body.m_cfg.kDF, face_body.m_cfg.kDF);
+  btSoftColliders::CollideVF_SS collide;
+  collide.mrg = ctx.mrg;
+  collide.psb[0] = &node_body;
+  collide.psb[1] = &face_body;
+  btDbvtNode node_leaf{};
+  btDbvtNode face_leaf{};
+  const auto scalar = [&](const psc::CandidatePair& c) {
+    const btSoftBody::Node& node = nodes[c.vertex];
+    const btSoftBody::Face& face = faces[c.triangle];
+    if (!robust) {
+      node_leaf.data = const_cast<btSoftBody::Node*>(&node);
+      face_leaf.data = const_cast<btSoftBody::Face*>(&face);
+      collide.Process(&node_leaf, &face_leaf);
+      return;
+    }
+    btSoftBody::SContact contact;
+    const ContactKind kind = discreteTest(true, ctx, node, face, contact);
+    if (kind == ContactKind::None) return;
+    node_body.m_scontacts.push_back(contact);
+    counts.robust += kind == ContactKind::Robust;
+  };
+  d::VfLanesIn in;
+  d::VfLanesOut out;
+  constexpr std::ptrdiff_t kAhead = 2 * d::kVfLanes;
+  const psc::CandidatePair* c = first;
+  for (; last - c >= d::kVfLanes; c += d::kVfLanes) {
+    for (int l = 0; l < d::kVfLanes; ++l) {
+      if (last - c > kAhead + l) {
+        const psc::CandidatePair& ahead = c[kAhead + l];
+        __builtin_prefetch(&faces[ahead.triangle]);
+        __builtin_prefetch(&nodes[ahead.vertex].m_x);
+      }
+      if (last - c > d::kVfLanes + l) {
+        for (const btSoftBody::Node* n : faces[c[d::kVfLanes + l].triangle].m_n) __builtin_prefetch(&n->m_x);
+      }
+      assert(static_cast<int>(c[l].vertex) < node_body.m_nodes.size());
+      assert(static_cast<int>(c[l].triangle) < face_body.m_faces.size());
+      const btSoftBody::Node& node = nodes[c[l].vertex];
+      const btSoftBody::Face& face = faces[c[l].triangle];
+      in.ox[l] = node.m_x.x(), in.oy[l] = node.m_x.y(), in.oz[l] = node.m_x.z();
+      in.qx[l] = node.m_q.x(), in.qy[l] = node.m_q.y(), in.qz[l] = node.m_q.z();
+      in.im[l] = node.m_im;
+      const btSoftBody::Node& na = *face.m_n[0];
+      const btSoftBody::Node& nb = *face.m_n[1];
+      const btSoftBody::Node& nc = *face.m_n[2];
+      in.ax[l] = na.m_x.x(), in.ay[l] = na.m_x.y(), in.az[l] = na.m_x.z(), in.ia[l] = na.m_im;
+      in.bx[l] = nb.m_x.x(), in.by[l] = nb.m_x.y(), in.bz[l] = nb.m_x.z(), in.ib[l] = nb.m_im;
+      in.cx[l] = nc.m_x.x(), in.cy[l] = nc.m_x.y(), in.cz[l] = nc.m_x.z(), in.ic[l] = nc.m_im;
+    }
+    d::vfLanes(in, ctx.mrg, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, robust, out);
+    if ((out.contact | out.scalar) == 0) continue;
+    for (int l = 0; l < d::kVfLanes; ++l) {
+      const std::uint32_t bit = 1u << l;
+      if (out.scalar & bit) {
+        scalar(c[l]);
+      } else if (out.contact & bit) {
+        btSoftBody::SContact contact;
+        contact.m_normal = btVector3(out.nx[l], out.ny[l], out.nz[l]);
+        contact.m_margin = out.margin[l];
+        contact.m_node = const_cast<btSoftBody::Node*>(&nodes[c[l].vertex]);
+        contact.m_face = const_cast<btSoftBody::Face*>(&faces[c[l].triangle]);
+        contact.m_weights = btVector3(out.wx[l], out.wy[l], out.wz[l]);
+        contact.m_friction = friction;
+        contact.m_cfm[0] = out.cfm0[l];
+        contact.m_cfm[1] = out.cfm1[l];
+        node_body.m_scontacts.push_back(contact);
+      }
+    }
+  }
+  for (; c != last; ++c) scalar(*c);
+}
+
+}  // namespace
+
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body, btScalar radius,
                               const psc::CandidatePair* first, const psc::CandidatePair* last) {
   ExactCounts counts;
   if (first == last) return counts;
   const int before = node_body.m_scontacts.size();
   counts.tests = static_cast<std::size_t>(last - first);
+#if !defined(BT_USE_DOUBLE_PRECISION)
+  if (test != ExactTest::Continuous && detail::vfLanesEnabled()) {
+    collideInLanes(test == ExactTest::Robust, PairContext{{&node_body, &face_body}, radius}, node_body, face_body,
+                   first, last, counts);
+    counts.contacts = static_cast<std::size_t>(node_body.m_scontacts.size() - before);
+    return counts;
+  }
+#endif
   if (test == ExactTest::Bullet) {
     btSoftColliders::CollideVF_SS collide;
     collide.mrg = radius;

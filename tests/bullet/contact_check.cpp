@@ -3,6 +3,7 @@
 #include "ground_truth.h"
 
 #include <cstdio>
+#include <cstring>
 #include <set>
 #include <utility>
 
@@ -15,7 +16,11 @@
 namespace psc_test {
 namespace {
 
-bool sameVector(const btVector3& a, const btVector3& b) { return a.x() == b.x() && a.y() == b.y() && a.z() == b.z(); }
+/// Bit for bit: a NaN equals the same NaN, and +0 differs from −0.
+bool sameBits(btScalar a, btScalar b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+bool sameVector(const btVector3& a, const btVector3& b) {
+  return sameBits(a.x(), b.x()) && sameBits(a.y(), b.y()) && sameBits(a.z(), b.z());
+}
 
 int ownerOfFace(const btAlignedObjectArray<btSoftBody*>& bodies, const btSoftBody::Face* face) {
   for (int b = 0; b < bodies.size(); ++b) {
@@ -31,8 +36,8 @@ Vec3 toVec(const btVector3& v) { return {double(v.x()), double(v.y()), double(v.
 
 bool sameContact(const btSoftBody::SContact& a, const btSoftBody::SContact& b) {
   return a.m_node == b.m_node && a.m_face == b.m_face && sameVector(a.m_weights, b.m_weights) &&
-         sameVector(a.m_normal, b.m_normal) && a.m_margin == b.m_margin && a.m_friction == b.m_friction &&
-         a.m_cfm[0] == b.m_cfm[0] && a.m_cfm[1] == b.m_cfm[1];
+         sameVector(a.m_normal, b.m_normal) && sameBits(a.m_margin, b.m_margin) && sameBits(a.m_friction, b.m_friction) &&
+         sameBits(a.m_cfm[0], b.m_cfm[0]) && sameBits(a.m_cfm[1], b.m_cfm[1]);
 }
 
 ContactAudit auditContacts(const btAlignedObjectArray<btSoftBody*>& bodies) {

@@ -23,6 +23,7 @@ struct ContactAudit {
 /// face) gives a contact equal field for field (bit for bit). Leaves m_scontacts as it was.
 ContactAudit auditContacts(const btAlignedObjectArray<btSoftBody*>& bodies);
 
+/// Field for field, bit for bit (a NaN normal equals the same NaN; +0 and −0 differ).
 bool sameContact(const btSoftBody::SContact& a, const btSoftBody::SContact& b);
 
 }  // namespace psc_test

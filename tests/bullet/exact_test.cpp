@@ -2,6 +2,7 @@
 // bit wherever Bullet accepts, and the exact contact, at any scale, where Bullet refuses a small
 // face; Continuous's crossing finder agrees with a brute-force root finder; the plugin with Robust
 // finds contacts between fine meshes where Bullet finds none.
+#include "../../bullet_plugin/src/vf_lanes.h"
 #include "contact_check.h"
 #include "ground_truth.h"
 #include "psc/bullet/bullet.h"
@@ -15,6 +16,7 @@
 #include <random>
 #include <set>
 #include <utility>
+#include <vector>
 
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
@@ -141,6 +143,115 @@ TEST(ExactTests, RobustIsBulletBitForBitWhereBulletAcceptsOnRandomPairs) {
               "Robust on faces Bullet's thresholds skip\n", accepted, refused, rescued);
   EXPECT_GT(accepted, 40000u);
   EXPECT_GT(refused, 40000u);
+}
+
+/// Many pairs in two bodies (node i of one against face i of the other), drawn like randomPair
+/// at sizes from tiny (faces Bullet's threshold skips) to large, with degenerate faces, nodes
+/// exactly on a face or a corner, and fixed nodes mixed in.
+struct BatchRig {
+  btSoftBodyWorldInfo info;
+  btSoftBody node_body;
+  btSoftBody face_body;
+  std::vector<psc::CandidatePair> candidates;
+
+  // Spread start positions: nodes all at the origin would make Bullet's node tree degenerate
+  // (quadratic insertion).
+  static std::vector<btVector3> spread(int n) {
+    std::vector<btVector3> x(std::size_t(n), btVector3(0, 0, 0));
+    for (int i = 0; i < n; ++i) x[std::size_t(i)] = btVector3(btScalar(i % 97), btScalar((i / 97) % 97), btScalar(i / 9409));
+    return x;
+  }
+  explicit BatchRig(int pairs)
+      : node_body(&info, pairs, spread(pairs).data(), nullptr), face_body(&info, 3 * pairs, spread(3 * pairs).data(), nullptr) {
+    for (int i = 0; i < pairs; ++i) face_body.appendFace(3 * i, 3 * i + 1, 3 * i + 2);
+    node_body.m_cfg.kDF = btScalar(0.3);
+    node_body.m_cfg.kSHR = btScalar(0.9);
+    face_body.m_cfg.kDF = btScalar(0.6);
+    face_body.m_cfg.kSHR = btScalar(0.8);
+    node_body.getCollisionShape()->setMargin(btScalar(0.025));
+    face_body.getCollisionShape()->setMargin(btScalar(0.025));
+    std::mt19937_64 rng(4711);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    const double sizes[] = {0.002, 0.01, 0.05, 0.3, 2.0};
+    PairRig one;
+    for (int i = 0; i < pairs; ++i) {
+      randomPair(one, rng, sizes[i % 5], 0.05);
+      btSoftBody::Node* corner[3] = {&face_body.m_nodes[3 * i], &face_body.m_nodes[3 * i + 1], &face_body.m_nodes[3 * i + 2]};
+      for (int k = 0; k < 3; ++k) {
+        corner[k]->m_x = one.face_body.m_nodes[k].m_x;
+        corner[k]->m_q = one.face_body.m_nodes[k].m_q;
+        corner[k]->m_im = one.face_body.m_nodes[k].m_im;
+      }
+      btSoftBody::Node& node = node_body.m_nodes[i];
+      node.m_x = one.node().m_x;
+      node.m_q = one.node().m_q;
+      node.m_im = one.node().m_im;
+      const double kind = u(rng);
+      if (kind < 0.04) {
+        corner[2]->m_x = corner[1]->m_x;  // two corners in one place
+      } else if (kind < 0.08) {
+        corner[2]->m_x = corner[0]->m_x + (corner[1]->m_x - corner[0]->m_x) * btScalar(u(rng));  // collinear
+      } else if (kind < 0.12) {
+        node.m_x = (corner[0]->m_x + corner[1]->m_x + corner[2]->m_x) / btScalar(3);  // on the face
+      } else if (kind < 0.14) {
+        node.m_x = corner[int(u(rng) * 3) % 3]->m_x;  // on a corner
+        node.m_q = node.m_x;
+      }
+      candidates.push_back({0, psc::Index(i), 1, psc::Index(i)});
+    }
+  }
+  /// The contacts collideCandidates appends with the lanes on or off.
+  std::vector<btSoftBody::SContact> run(ExactTest test, bool lanes, psc::bullet::ExactCounts& counts) {
+    psc::bullet::detail::allowVfLanes(lanes);
+    node_body.m_scontacts.resize(0);
+    counts = psc::bullet::collideCandidates(test, node_body, face_body, candidates.data(),
+                                            candidates.data() + candidates.size());
+    psc::bullet::detail::allowVfLanes(true);
+    std::vector<btSoftBody::SContact> out(node_body.m_scontacts.size());
+    for (int i = 0; i < node_body.m_scontacts.size(); ++i) out[std::size_t(i)] = node_body.m_scontacts[i];
+    return out;
+  }
+};
+
+TEST(ExactTests, LanesAreBulletsTestBitForBit) {
+  // The exact stage runs Bullet's test eight pairs at a time with AVX (bullet_plugin/src/vf_lanes.h).
+  // It must push the very contacts CollideVF_SS::Process pushes, in the same order, and Robust's
+  // lanes must give what Robust gives pair by pair. 10,003 pairs: the last three run scalar.
+  psc::bullet::detail::allowVfLanes(true);
+  if (!psc::bullet::detail::vfLanesEnabled()) GTEST_SKIP() << "no AVX on this processor";
+  BatchRig rig(10003);
+  psc::bullet::ExactCounts lanes_counts, scalar_counts;
+  const auto lanes = rig.run(ExactTest::Bullet, true, lanes_counts);
+  const auto scalar = rig.run(ExactTest::Bullet, false, scalar_counts);
+  ASSERT_EQ(lanes.size(), scalar.size());
+  for (std::size_t i = 0; i < lanes.size(); ++i) ASSERT_TRUE(psc_test::sameContact(lanes[i], scalar[i])) << "contact " << i;
+  // The scalar run is Process itself, pair by pair:
+  btSoftColliders::CollideVF_SS collide;
+  collide.mrg = btScalar(0.05);
+  collide.psb[0] = &rig.node_body;
+  collide.psb[1] = &rig.face_body;
+  rig.node_body.m_scontacts.resize(0);
+  for (const psc::CandidatePair& c : rig.candidates) {
+    btDbvtNode node_leaf{}, face_leaf{};
+    node_leaf.data = &rig.node_body.m_nodes[int(c.vertex)];
+    face_leaf.data = &rig.face_body.m_faces[int(c.triangle)];
+    collide.Process(&node_leaf, &face_leaf);
+  }
+  ASSERT_EQ(rig.node_body.m_scontacts.size(), int(lanes.size()));
+  for (std::size_t i = 0; i < lanes.size(); ++i)
+    ASSERT_TRUE(psc_test::sameContact(lanes[i], rig.node_body.m_scontacts[int(i)])) << "contact " << i;
+  EXPECT_GT(lanes.size(), 2000u);
+  EXPECT_LT(lanes.size(), 8000u);
+
+  const auto robust_lanes = rig.run(ExactTest::Robust, true, lanes_counts);
+  const auto robust_scalar = rig.run(ExactTest::Robust, false, scalar_counts);
+  ASSERT_EQ(robust_lanes.size(), robust_scalar.size());
+  for (std::size_t i = 0; i < robust_lanes.size(); ++i)
+    ASSERT_TRUE(psc_test::sameContact(robust_lanes[i], robust_scalar[i])) << "robust contact " << i;
+  EXPECT_EQ(lanes_counts.robust, scalar_counts.robust);
+  EXPECT_GT(lanes_counts.robust, 100u);  // Robust's own lanes (small faces, nodes on a face) were exercised
+  std::printf("lanes: %zu Bullet contacts, %zu Robust contacts (%zu of Robust's own) of %zu pairs, equal bit for bit\n",
+              lanes.size(), robust_lanes.size(), lanes_counts.robust, rig.candidates.size());
 }
 
 TEST(ExactTests, RobustFindsTheExactContactOnSmallFacesAtAnyScale) {
