@@ -243,6 +243,7 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
   return collideCandidates(test, node_body, face_body, marginSum(node_body, face_body), first, last);
 }
 
+#if !defined(BT_USE_DOUBLE_PRECISION)
 namespace {
 
 /// Bullet's and Robust's exact stage eight candidates at a time (detail::vfLanes), in candidate
@@ -327,6 +328,7 @@ void collideInLanes(bool robust, const PairContext& ctx, btSoftBody& node_body, 
 }
 
 }  // namespace
+#endif
 
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body, btScalar radius,
                               const psc::CandidatePair* first, const psc::CandidatePair* last) {

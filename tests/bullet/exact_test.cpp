@@ -217,6 +217,7 @@ TEST(ExactTests, LanesAreBulletsTestBitForBit) {
   // The exact stage runs Bullet's test eight pairs at a time with AVX (bullet_plugin/src/vf_lanes.h).
   // It must push the very contacts CollideVF_SS::Process pushes, in the same order, and Robust's
   // lanes must give what Robust gives pair by pair. 10,003 pairs: the last three run scalar.
+  if (sizeof(btScalar) != sizeof(float)) GTEST_SKIP() << "the lanes serve single-precision Bullet only";
   psc::bullet::detail::allowVfLanes(true);
   if (!psc::bullet::detail::vfLanesEnabled()) GTEST_SKIP() << "no AVX on this processor";
   BatchRig rig(10003);
@@ -817,11 +818,15 @@ TEST(ExactTests, RobustFindsContactsBetweenTinyTrianglesWhereBulletFindsNone) {
     EXPECT_GT(tests, 1000u);
     EXPECT_GT(truth_strict, 100u);
     EXPECT_EQ(outside, 0u);
-    if (exact == ExactTest::Bullet) {
+    // Double-precision Bullet's threshold (DBL_EPSILON) is far below these faces: it sees them.
+    const bool below_bullets_threshold = sizeof(btScalar) == sizeof(float);
+    if (exact == ExactTest::Bullet && below_bullets_threshold) {
       EXPECT_EQ(contacts, 0u);
     } else {
       EXPECT_GT(contacts, 100u);
-      EXPECT_EQ(robust, contacts);
+      if (exact == ExactTest::Robust) {
+        EXPECT_EQ(robust, below_bullets_threshold ? contacts : 0u);
+      }
       EXPECT_EQ(found_strict, truth_strict);  // strict recall 1 over all pairs
     }
   }
