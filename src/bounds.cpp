@@ -185,6 +185,57 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
   }
 }
 
+#if defined(__SSE2__)
+/// streamBoxes for the common step: single-precision positions, the radius bound, no rest fit and
+/// no packed copy. The boxes are kept packed in single precision (x, y, z, 0): min and max only
+/// pick coordinates, so the double boxes made from them at the end are the same values. The
+/// motion and the finiteness sum are computed as in streamBoxes, in double.
+void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev,
+                      std::size_t prev_stride, std::vector<MotionBox>& boxes, double& sum) {
+  const std::size_t n = ch.chunk_of.size(), chunks = ch.count();
+  // __m128's alignment attribute is not part of the vector's type: its allocator aligns by alignof.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wignored-attributes"
+  thread_local std::vector<__m128> lo, hi;
+#pragma GCC diagnostic pop
+  lo.assign(chunks, _mm_set1_ps(std::numeric_limits<float>::infinity()));
+  hi.assign(chunks, _mm_set1_ps(-std::numeric_limits<float>::infinity()));
+  for (std::size_t v = 0; v < n; ++v) {
+    __builtin_prefetch(base + (v + 24) * stride);
+    if (prev != nullptr) __builtin_prefetch(prev + (v + 24) * prev_stride);
+    const Index c = ch.chunk_of[v];
+    if (c == kInvalidIndex) continue;
+    const float* p = reinterpret_cast<const float*>(base + v * stride);
+    // x, y and z without reading past them (the view's records may end right after z).
+    const __m128 xv = _mm_movelh_ps(_mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(p))), _mm_load_ss(p + 2));
+    lo[c] = _mm_min_ps(lo[c], xv);
+    hi[c] = _mm_max_ps(hi[c], xv);
+    const double x = static_cast<double>(p[0]), y = static_cast<double>(p[1]), z = static_cast<double>(p[2]);
+    double s = x + y + z;
+    if (prev != nullptr) {
+      const float* q = reinterpret_cast<const float*>(prev + v * prev_stride);
+      const Vec3 d = Vec3(x, y, z) - Vec3(static_cast<double>(q[0]), static_cast<double>(q[1]), static_cast<double>(q[2]));
+      const double m2 = d.squaredNorm();
+      s += m2;
+      double& motion = boxes[c].motion;
+      motion = m2 > motion ? m2 : motion;  // squared until the end of the pass
+    }
+    sum += s;
+    for (Index f : ch.foreign_of.row(static_cast<Index>(v))) {
+      lo[f] = _mm_min_ps(lo[f], xv);
+      hi[f] = _mm_max_ps(hi[f], xv);
+    }
+  }
+  for (std::size_t c = 0; c < chunks; ++c) {
+    alignas(16) float l[4], h[4];
+    _mm_store_ps(l, lo[c]);
+    _mm_store_ps(h, hi[c]);
+    boxes[c].lo = Vec3(l[0], l[1], l[2]);
+    boxes[c].hi = Vec3(h[0], h[1], h[2]);
+  }
+}
+#endif
+
 // Area and longest edge of the triangles a chunk owns, from the refit's packed copy of the positions.
 template <typename T>
 void measureChunk(const ChunkLists& ch, Index chunk, const char* base, std::size_t stride, double& area,
@@ -369,6 +420,11 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
   } else {
     if (b.rest_fit) b.rest_fit->filled = false;
     NoRestFit none;
+#if defined(__SSE2__)
+    if (is_float && !swept && cf == nullptr)
+      streamBoxesFloat(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
+    else
+#endif
     if (is_float)
       streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, none, cf);
     else
