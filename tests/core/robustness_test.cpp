@@ -178,6 +178,56 @@ TEST(BadMesh, NonFiniteCoordinateNamesBodyVertexAndView) {
   EXPECT_ERROR_NAMES(w.addBody(descOf(b)), "ball", "previous positions", "vertex 9");
 }
 
+// Single-precision positions take the refit's packed path (bounds.cpp, streamBoxesFloat): the same
+// candidates as the same positions given in double, and a NaN or an infinity, current or previous,
+// named as on the double path. Records of 12 bytes (the last vertex ends the array) and of 16.
+TEST(SinglePrecision, PackedRefitFindsWhatDoublePositionsFindAndNamesBadValues) {
+  for (std::size_t stride_floats : {std::size_t{3}, std::size_t{4}}) {
+    std::vector<Body> bodies = againstSphere(makeTorus(1.0, 0.4, 600), 0.05, -0.1);
+    std::mt19937_64 rng(99);
+    std::uniform_real_distribution<double> u(-0.01, 0.01);
+    std::vector<std::vector<float>> now(2), before(2);
+    for (std::size_t b = 0; b < 2; ++b) {
+      const std::vector<Vec3>& x = bodies[b].mesh.vertices;
+      bodies[b].previous.resize(x.size());
+      now[b].assign(x.size() * stride_floats, 7.0f);
+      before[b].assign(x.size() * stride_floats, 7.0f);
+      for (std::size_t v = 0; v < x.size(); ++v) {
+        for (int k = 0; k < 3; ++k) {
+          now[b][v * stride_floats + k] = static_cast<float>(x[v][k]);
+          before[b][v * stride_floats + k] = static_cast<float>(x[v][k] + u(rng));
+        }
+        // The double world reads exactly the single-precision values.
+        bodies[b].mesh.vertices[v] = Vec3(now[b][v * stride_floats], now[b][v * stride_floats + 1], now[b][v * stride_floats + 2]);
+        bodies[b].previous[v] = Vec3(before[b][v * stride_floats], before[b][v * stride_floats + 1], before[b][v * stride_floats + 2]);
+      }
+    }
+    SensorWorld doubles, singles;
+    addAll(doubles, bodies);
+    for (std::size_t b = 0; b < 2; ++b) {
+      BodyDesc d = descOf(bodies[b]);
+      d.positions = PositionView(now[b].data(), bodies[b].mesh.vertices.size(), stride_floats * sizeof(float));
+      d.previous = PositionView(before[b].data(), bodies[b].mesh.vertices.size(), stride_floats * sizeof(float));
+      singles.addBody(d);
+    }
+    for (int step = 0; step < 3; ++step) {
+      const std::vector<CandidatePair> want = doubles.step().candidates;
+      const std::vector<CandidatePair> got = singles.step().candidates;
+      EXPECT_GT(want.size(), 100u);
+      EXPECT_EQ(got, want) << "stride " << stride_floats << ", step " << step;
+    }
+    for (float bad : {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+      for (std::vector<float>* where : {&now[1], &before[1]}) {
+        const float keep = (*where)[11 * stride_floats + 2];
+        (*where)[11 * stride_floats + 2] = bad;
+        EXPECT_ERROR_NAMES(singles.step(), "ball", "vertex 11");
+        (*where)[11 * stride_floats + 2] = keep;
+        EXPECT_NO_THROW(singles.step());
+      }
+    }
+  }
+}
+
 TEST(BadMesh, CoordinatesBeyondTheLimitAreRejected) {
   Body b = bodyOf(makeSphere(1.0, 100), "ball");
   b.mesh.vertices[3].x() = 1e200;  // finite, but its square overflows
