@@ -192,46 +192,50 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
 /// motion is rounded in single precision and raised by 1e-6 relative, so never below the double
 /// value; a NaN is caught by an unordered compare, an infinity by the boxes' or the motion's check.
 /// On 8 tori × 50,000 vertices the refit went from 3.42 to 3.16 ms a step with the boxes alone
-/// packed, and to about 3.06 ms with the motion too (psc_demo --scene tori_pile --bodies 8
-/// --resolution 50000 --steps 40 --pipeline sensors --truth none, refit_ms_mean, two runs each).
+/// packed, to about 3.06 ms with the motion too, and to 2.90–2.94 with the motion carried in the
+/// upper box's fourth lane and one prefetch for Bullet's node (m_x and m_q share a cache line)
+/// (psc_demo --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors
+/// --truth none, refit_ms_mean, two or three alternating runs each).
 void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev,
                       std::size_t prev_stride, std::vector<MotionBox>& boxes, double& sum) {
   const std::size_t n = ch.chunk_of.size(), chunks = ch.count();
+  // Per chunk, lo = (x, y, z, 0) and hi = (x, y, z, squared motion of its own vertices).
   // __m128's alignment attribute is not part of the vector's type: its allocator aligns by alignof.
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wignored-attributes"
-  thread_local std::vector<__m128> lo, hi;
+  thread_local std::vector<std::array<__m128, 2>> box;
 #pragma GCC diagnostic pop
-  thread_local std::vector<float> motion;
-  lo.assign(chunks, _mm_set1_ps(std::numeric_limits<float>::infinity()));
-  hi.assign(chunks, _mm_set1_ps(-std::numeric_limits<float>::infinity()));
-  motion.assign(chunks, 0.0f);
-  // x, y and z without reading past them (the view's records may end right after z); lane 3 is 0.
-  const auto load3 = [](const char* at) {
-    const float* p = reinterpret_cast<const float*>(at);
-    return _mm_movelh_ps(_mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(p))), _mm_load_ss(p + 2));
-  };
+  const float inf = std::numeric_limits<float>::infinity();
+  box.assign(chunks, {_mm_set1_ps(inf), _mm_setr_ps(-inf, -inf, -inf, 0.0f)});
+  // The same stride and records less than a cache line apart: one prefetch brings both.
+  const bool prev_apart = prev != nullptr && (prev_stride != stride || std::abs(prev - base) >= 64);
   __m128 nan = _mm_setzero_ps();
   for (std::size_t v = 0; v < n; ++v) {
     __builtin_prefetch(base + (v + 24) * stride);
-    if (prev != nullptr) __builtin_prefetch(prev + (v + 24) * prev_stride);
+    if (prev_apart) __builtin_prefetch(prev + (v + 24) * prev_stride);
     const Index c = ch.chunk_of[v];
     if (c == kInvalidIndex) continue;
-    const __m128 xv = load3(base + v * stride);
+    // x, y and z without reading past them (the view's records may end right after z).
+    const float* p = reinterpret_cast<const float*>(base + v * stride);
+    const __m128 xy = _mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(p)));
+    const __m128 z = _mm_load_ss(p + 2);
+    const __m128 xv = _mm_movelh_ps(xy, z);  // (x, y, z, 0)
     nan = _mm_or_ps(nan, _mm_cmpunord_ps(xv, xv));
-    lo[c] = _mm_min_ps(lo[c], xv);
-    hi[c] = _mm_max_ps(hi[c], xv);
+    __m128 xm = xv;
     if (prev != nullptr) {
-      const __m128 qv = load3(prev + v * prev_stride);
+      const float* q = reinterpret_cast<const float*>(prev + v * prev_stride);
+      const __m128 qv = _mm_movelh_ps(_mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(q))), _mm_load_ss(q + 2));
       nan = _mm_or_ps(nan, _mm_cmpunord_ps(qv, qv));
       const __m128 d = _mm_sub_ps(xv, qv);
       const __m128 d2 = _mm_mul_ps(d, d);
       const __m128 m2 = _mm_add_ss(_mm_add_ss(d2, _mm_shuffle_ps(d2, d2, 1)), _mm_movehl_ps(d2, d2));
-      _mm_store_ss(&motion[c], _mm_max_ss(_mm_load_ss(&motion[c]), m2));
+      xm = _mm_movelh_ps(xy, _mm_unpacklo_ps(z, m2));  // (x, y, z, m2)
     }
+    box[c][0] = _mm_min_ps(box[c][0], xv);
+    box[c][1] = _mm_max_ps(box[c][1], xm);
     for (Index f : ch.foreign_of.row(static_cast<Index>(v))) {
-      lo[f] = _mm_min_ps(lo[f], xv);
-      hi[f] = _mm_max_ps(hi[f], xv);
+      box[f][0] = _mm_min_ps(box[f][0], xv);
+      box[f][1] = _mm_max_ps(box[f][1], xv);  // lane 3: 0, the motion stays the own vertices'
     }
   }
   // A NaN coordinate, or an infinite one (in a box or, through the motion, in the previous
@@ -239,13 +243,13 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
   if (_mm_movemask_ps(nan) != 0) sum += std::numeric_limits<double>::quiet_NaN();
   for (std::size_t c = 0; c < chunks; ++c) {
     alignas(16) float l[4], h[4];
-    _mm_store_ps(l, lo[c]);
-    _mm_store_ps(h, hi[c]);
+    _mm_store_ps(l, box[c][0]);
+    _mm_store_ps(h, box[c][1]);
     boxes[c].lo = Vec3(l[0], l[1], l[2]);
     boxes[c].hi = Vec3(h[0], h[1], h[2]);
     // Squared until the end of the pass. Rounded in single precision (a few ulps, < 1e-6
     // relative): raised by 1e-6 so that it never falls below the double value.
-    boxes[c].motion = static_cast<double>(motion[c]) * (1.0 + 1e-6);
+    boxes[c].motion = static_cast<double>(h[3]) * (1.0 + 1e-6);
     sum += boxes[c].motion;
   }
 }
