@@ -7,7 +7,10 @@
 //   build/release/demos/psc_exact_bench [--benchmark_filter=...] [--benchmark_repetitions=5]
 //
 // The counter per_test is the wall time of one test (seconds, e.g. 45n = 45 ns); ratios to the
-// Bullet row of the same scene are what README "Exact tests" quotes.
+// Bullet row of the same scene are what README "Exact tests" quotes. The rows `*_pairwise` run
+// the same tests pair by pair instead of eight at a time with AVX
+// (bullet_plugin/src/vf_lanes.h): what the plugin does without AVX or in double precision.
+#include "../bullet_plugin/src/vf_lanes.h"
 #include "bullet_scene.h"
 #include "psc/bullet/bullet.h"
 #include "scenes.h"
@@ -95,7 +98,10 @@ Capture capture(const std::string& name, std::size_t resolution, double scale, s
   return c;
 }
 
-void run(benchmark::State& state, const Capture& c, ExactTest test) {
+/// `lanes` false: the tests pair by pair (the plugin's path without AVX or in double precision),
+/// the same contacts.
+void run(benchmark::State& state, const Capture& c, ExactTest test, bool lanes = true) {
+  psc::bullet::detail::allowVfLanes(lanes);
   std::size_t contacts = 0, robust = 0, crossings = 0;
   for (auto _ : state) {
     contacts = robust = crossings = 0;
@@ -116,6 +122,7 @@ void run(benchmark::State& state, const Capture& c, ExactTest test) {
   state.counters["crossings"] = double(crossings);
   state.counters["per_test"] =
       benchmark::Counter(double(c.tests), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+  psc::bullet::detail::allowVfLanes(true);
 }
 
 struct Case {
@@ -150,6 +157,12 @@ int main(int argc, char** argv) {
       benchmark::RegisterBenchmark((std::string(k.label) + "/" + psc::bullet::toString(test)).c_str(),
                                    [&c, test](benchmark::State& s) { run(s, c, test); })
           ->Unit(benchmark::kMicrosecond);
+    if (psc::bullet::detail::vfLanesEnabled()) {
+      for (ExactTest test : {ExactTest::Bullet, ExactTest::Robust, ExactTest::Continuous})
+        benchmark::RegisterBenchmark((std::string(k.label) + "/" + psc::bullet::toString(test) + "_pairwise").c_str(),
+                                     [&c, test](benchmark::State& s) { run(s, c, test, false); })
+            ->Unit(benchmark::kMicrosecond);
+    }
   }
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();

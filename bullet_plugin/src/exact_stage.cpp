@@ -132,6 +132,9 @@ Vec3 normalWithoutDistance(const btSoftBody::Node& node, const btSoftBody::Face&
   return e.cross(Vec3::Unit(axis)).normalized();
 }
 
+ContactKind robustContact(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
+                          btScalar m, btSoftBody::SContact& contact);
+
 /// Bullet's CollideVF_SS decision and contact (Robust = false), or Robust's (true). Without
 /// `motion_term` the radius is the margins alone (Continuous), not margins + 2·|m_x − m_q|.
 ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::Node& node,
@@ -151,7 +154,14 @@ ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::
   } else if (!robust || !skipped) {
     return ContactKind::None;
   }
-  // Bullet skipped the face or an edge as too small, or found the node exactly on the face.
+  return robustContact(ctx, node, face, m, contact);
+}
+
+/// Robust's own contact at radius m, where Bullet skipped the face or an edge as too small, or
+/// found the node exactly on the face: the exact closest point in double.
+ContactKind robustContact(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
+                          btScalar m, btSoftBody::SContact& contact) {
+  const btVector3 o = node.m_x;
   const Vec3 po = toVec(o);
   const ClosestPoint cp = closestPointOnTriangle(po, toVec(face.m_n[0]->m_x), toVec(face.m_n[1]->m_x),
                                                  toVec(face.m_n[2]->m_x));
@@ -169,9 +179,18 @@ ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::
 /// within the margins alone. Bullet's motion term (2·|m_x − m_q|) is what stands in for a
 /// continuous test in CollideVF_SS; with the crossing test it is not needed, and its contacts
 /// push a fast node out to twice its step, i.e. throw it back faster than it came.
+ContactKind crossingOver(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
+                         ContactKind discrete, btSoftBody::SContact& contact);
+
 ContactKind continuousTest(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
                            btSoftBody::SContact& contact) {
-  const ContactKind discrete = discreteTest(true, ctx, node, face, contact, false);
+  return crossingOver(ctx, node, face, discreteTest(true, ctx, node, face, contact, false), contact);
+}
+
+/// Continuous's second half: given the discrete test's outcome (`discrete`, `contact`), the
+/// crossing contact that replaces it when the node passed through the face during the step.
+ContactKind crossingOver(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
+                         ContactKind discrete, btSoftBody::SContact& contact) {
   const std::array<Vec3, 4> start{toVec(node.m_q), toVec(face.m_n[0]->m_q), toVec(face.m_n[1]->m_q),
                                   toVec(face.m_n[2]->m_q)};
   const std::array<Vec3, 4> end{toVec(node.m_x), toVec(face.m_n[0]->m_x), toVec(face.m_n[1]->m_x),
@@ -246,12 +265,18 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
 #if !defined(BT_USE_DOUBLE_PRECISION)
 namespace {
 
-/// Bullet's and Robust's exact stage eight candidates at a time (detail::vfLanes), in candidate
-/// order; a lane the kernel cannot decide runs the scalar test, as does the tail.
-void collideInLanes(bool robust, const PairContext& ctx, btSoftBody& node_body, btSoftBody& face_body,
-                    const psc::CandidatePair* first, const psc::CandidatePair* last, ExactCounts& counts) {
+/// The exact stage eight candidates at a time (detail::vfLanes), in candidate order. Each
+/// candidate's outcome goes to take(node, kind, contact); Bullet's test where the lanes cannot
+/// decide runs Process itself, which pushes its contact. Robust and Continuous run their scalar
+/// discrete test on such lanes; Continuous then adds its crossing test to every lane. The tail
+/// (fewer than eight) runs the scalar tests.
+template <class Take>
+void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_body, btSoftBody& face_body,
+                    const psc::CandidatePair* first, const psc::CandidatePair* last, Take&& take) {
   static_assert(sizeof(btScalar) == sizeof(float), "the lanes are single precision");
   namespace d = detail;
+  const bool robust = test != ExactTest::Bullet;
+  const bool continuous = test == ExactTest::Continuous;
   const btSoftBody::Node* nodes = &node_body.m_nodes[0];
   const btSoftBody::Face* faces = &face_body.m_faces[0];
   const btScalar friction = btMax(node_body.m_cfg.kDF, face_body.m_cfg.kDF);
@@ -261,20 +286,20 @@ void collideInLanes(bool robust, const PairContext& ctx, btSoftBody& node_body, 
   collide.psb[1] = &face_body;
   btDbvtNode node_leaf{};
   btDbvtNode face_leaf{};
-  const auto scalar = [&](const psc::CandidatePair& c) {
-    const btSoftBody::Node& node = nodes[c.vertex];
-    const btSoftBody::Face& face = faces[c.triangle];
+  btSoftBody::SContact contact;
+  // The scalar discrete test of one candidate (Bullet's: Process pushes; returns None).
+  const auto discrete = [&](const btSoftBody::Node& node, const btSoftBody::Face& face) {
     if (!robust) {
       node_leaf.data = const_cast<btSoftBody::Node*>(&node);
       face_leaf.data = const_cast<btSoftBody::Face*>(&face);
       collide.Process(&node_leaf, &face_leaf);
-      return;
+      return ContactKind::None;
     }
-    btSoftBody::SContact contact;
-    const ContactKind kind = discreteTest(true, ctx, node, face, contact);
-    if (kind == ContactKind::None) return;
-    node_body.m_scontacts.push_back(contact);
-    counts.robust += kind == ContactKind::Robust;
+    return discreteTest(true, ctx, node, face, contact, !continuous);
+  };
+  const auto finish = [&](const btSoftBody::Node& node, const btSoftBody::Face& face, ContactKind kind) {
+    if (continuous) kind = crossingOver(ctx, node, face, kind, contact);
+    take(node, kind, contact);
   };
   d::VfLanesIn in;
   d::VfLanesOut out;
@@ -304,27 +329,36 @@ void collideInLanes(bool robust, const PairContext& ctx, btSoftBody& node_body, 
       in.bx[l] = nb.m_x.x(), in.by[l] = nb.m_x.y(), in.bz[l] = nb.m_x.z(), in.ib[l] = nb.m_im;
       in.cx[l] = nc.m_x.x(), in.cy[l] = nc.m_x.y(), in.cz[l] = nc.m_x.z(), in.ic[l] = nc.m_im;
     }
-    d::vfLanes(in, ctx.mrg, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, robust, out);
-    if ((out.contact | out.scalar) == 0) continue;
+    d::vfLanes(in, ctx.mrg, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, robust, !continuous, out);
+    if ((out.contact | out.scalar | out.robust) == 0 && !continuous) continue;
     for (int l = 0; l < d::kVfLanes; ++l) {
       const std::uint32_t bit = 1u << l;
-      if (out.scalar & bit) {
-        scalar(c[l]);
+      const btSoftBody::Node& node = nodes[c[l].vertex];
+      const btSoftBody::Face& face = faces[c[l].triangle];
+      ContactKind kind = ContactKind::None;
+      if (out.robust & bit) {
+        kind = robustContact(ctx, node, face, out.margin[l], contact);
+      } else if (out.scalar & bit) {
+        kind = discrete(node, face);
       } else if (out.contact & bit) {
-        btSoftBody::SContact contact;
         contact.m_normal = btVector3(out.nx[l], out.ny[l], out.nz[l]);
         contact.m_margin = out.margin[l];
-        contact.m_node = const_cast<btSoftBody::Node*>(&nodes[c[l].vertex]);
-        contact.m_face = const_cast<btSoftBody::Face*>(&faces[c[l].triangle]);
+        contact.m_node = const_cast<btSoftBody::Node*>(&node);
+        contact.m_face = const_cast<btSoftBody::Face*>(&face);
         contact.m_weights = btVector3(out.wx[l], out.wy[l], out.wz[l]);
         contact.m_friction = friction;
         contact.m_cfm[0] = out.cfm0[l];
         contact.m_cfm[1] = out.cfm1[l];
-        node_body.m_scontacts.push_back(contact);
+        kind = ContactKind::Bullet;
       }
+      finish(node, face, kind);
     }
   }
-  for (; c != last; ++c) scalar(*c);
+  for (; c != last; ++c) {
+    const btSoftBody::Node& node = nodes[c->vertex];
+    const btSoftBody::Face& face = faces[c->triangle];
+    finish(node, face, discrete(node, face));
+  }
 }
 
 }  // namespace
@@ -336,15 +370,11 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
   if (first == last) return counts;
   const int before = node_body.m_scontacts.size();
   counts.tests = static_cast<std::size_t>(last - first);
+  bool lanes = false;
 #if !defined(BT_USE_DOUBLE_PRECISION)
-  if (test != ExactTest::Continuous && detail::vfLanesEnabled()) {
-    collideInLanes(test == ExactTest::Robust, PairContext{{&node_body, &face_body}, radius}, node_body, face_body,
-                   first, last, counts);
-    counts.contacts = static_cast<std::size_t>(node_body.m_scontacts.size() - before);
-    return counts;
-  }
+  lanes = detail::vfLanesEnabled();
 #endif
-  if (test == ExactTest::Bullet) {
+  if (test == ExactTest::Bullet && !lanes) {
     btSoftColliders::CollideVF_SS collide;
     collide.mrg = radius;
     collide.psb[0] = &node_body;
@@ -378,17 +408,10 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
     return counts;
   }
   const PairContext ctx{{&node_body, &face_body}, radius};
-  btSoftBody::SContact contact;
   std::vector<const btSoftBody::Node*> crossed;  // nodes with a crossing contact in this call
   std::vector<char> is_crossing;                 // per contact pushed in this call
-  for (const psc::CandidatePair* c = first; c != last; ++c) {
-    assert(static_cast<int>(c->vertex) < node_body.m_nodes.size());
-    assert(static_cast<int>(c->triangle) < face_body.m_faces.size());
-    const btSoftBody::Node& node = node_body.m_nodes[static_cast<int>(c->vertex)];
-    const btSoftBody::Face& face = face_body.m_faces[static_cast<int>(c->triangle)];
-    const ContactKind kind = test == ExactTest::Robust ? discreteTest(true, ctx, node, face, contact)
-                                                       : continuousTest(ctx, node, face, contact);
-    if (kind == ContactKind::None) continue;
+  const auto take = [&](const btSoftBody::Node& node, ContactKind kind, const btSoftBody::SContact& contact) {
+    if (kind == ContactKind::None) return;
     node_body.m_scontacts.push_back(contact);
     counts.robust += kind == ContactKind::Robust;
     if (test == ExactTest::Continuous) {
@@ -397,6 +420,23 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
         ++counts.crossings;
         crossed.push_back(&node);
       }
+    }
+  };
+#if !defined(BT_USE_DOUBLE_PRECISION)
+  if (lanes) {
+    collideInLanes(test, ctx, node_body, face_body, first, last, take);
+  } else
+#endif
+  {
+    btSoftBody::SContact contact;
+    for (const psc::CandidatePair* c = first; c != last; ++c) {
+      assert(static_cast<int>(c->vertex) < node_body.m_nodes.size());
+      assert(static_cast<int>(c->triangle) < face_body.m_faces.size());
+      const btSoftBody::Node& node = node_body.m_nodes[static_cast<int>(c->vertex)];
+      const btSoftBody::Face& face = face_body.m_faces[static_cast<int>(c->triangle)];
+      take(node, test == ExactTest::Robust ? discreteTest(true, ctx, node, face, contact)
+                                           : continuousTest(ctx, node, face, contact),
+           contact);
     }
   }
   if (!crossed.empty()) {

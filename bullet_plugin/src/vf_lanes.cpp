@@ -71,7 +71,7 @@ PSC_AVX void projectEdge(const V3& a, const V3& b, __m256 active, V3& prj, __m25
 }
 
 [[gnu::target("avx")]] void lanesAvx(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust,
-                                     VfLanesOut& out) {
+                                     bool motion_term, VfLanesOut& out) {
   const __m256 zero = _mm256_setzero_ps();
   const __m256 one = _mm256_set1_ps(1.0f);
   const __m256 flt_max = _mm256_set1_ps(FLT_MAX);  // SIMD_INFINITY
@@ -104,9 +104,10 @@ PSC_AVX void projectEdge(const V3& a, const V3& b, __m256 active, V3& prj, __m25
   // Every value ProjectOrigin assigns to d is below SIMD_INFINITY: d < FLT_MAX <=> p was set.
   const __m256 set = lt(d, flt_max);
 
-  // m = mrg + (o − m_q).length() * 2; the pair is accepted when d < m·m.
+  // m = mrg + (o − m_q).length() * 2 (or mrg alone); the pair is accepted when d < m·m.
   const V3 motion = sub(o, load(in.qx, in.qy, in.qz));
-  const __m256 m = add(_mm256_set1_ps(mrg), mul(_mm256_sqrt_ps(dot(motion, motion)), _mm256_set1_ps(2.0f)));
+  const __m256 m = motion_term ? add(_mm256_set1_ps(mrg), mul(_mm256_sqrt_ps(dot(motion, motion)), _mm256_set1_ps(2.0f)))
+                               : _mm256_set1_ps(mrg);
   const __m256 accept = lt(d, mul(m, m));
 
   // BaryCoord(A, B, C, p + o).
@@ -139,14 +140,18 @@ PSC_AVX void projectEdge(const V3& a, const V3& b, __m256 active, V3& prj, __m25
   _mm256_store_ps(out.cfm0, mul(div(ma, ms), _mm256_set1_ps(kshr0)));
   _mm256_store_ps(out.cfm1, mul(div(mb, ms), _mm256_set1_ps(kshr1)));
 
-  __m256 scalar = butNot(accept, set);
+  const __m256 scalar = butNot(accept, set);
+  out.scalar = static_cast<std::uint32_t>(_mm256_movemask_ps(scalar));
+  out.robust = 0;
   if (robust) {
     // discreteTest(robust): Bullet's contact only where accepted at d > 0; an accepted node on the
-    // face, or a pair beyond the radius on a face or edge Bullet skipped, goes to the scalar path.
-    scalar = either(scalar, either(both(accept, notGt(d, zero)), butNot(skipped, accept)));
+    // face, or a pair beyond the radius on a face or edge Bullet skipped, is Robust's own.
+    out.robust = static_cast<std::uint32_t>(
+                     _mm256_movemask_ps(either(both(accept, notGt(d, zero)), butNot(skipped, accept)))) &
+                 ~out.scalar;
   }
-  out.scalar = static_cast<std::uint32_t>(_mm256_movemask_ps(scalar));
-  out.contact = static_cast<std::uint32_t>(_mm256_movemask_ps(both(both(accept, set), moves))) & ~out.scalar;
+  out.contact = static_cast<std::uint32_t>(_mm256_movemask_ps(both(both(accept, set), moves))) &
+                ~(out.scalar | out.robust);
 }
 #undef PSC_AVX
 #endif
@@ -164,12 +169,12 @@ bool vfLanesEnabled() {
 
 void allowVfLanes(bool allowed) { g_allowed.store(allowed, std::memory_order_relaxed); }
 
-void vfLanes(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust, VfLanesOut& out) {
+void vfLanes(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust, bool motion_term, VfLanesOut& out) {
 #if defined(PSC_HAVE_VF_LANES)
-  lanesAvx(in, mrg, kshr0, kshr1, robust, out);
+  lanesAvx(in, mrg, kshr0, kshr1, robust, motion_term, out);
 #else
-  (void)in, (void)mrg, (void)kshr0, (void)kshr1, (void)robust;
-  out.contact = 0;
+  (void)in, (void)mrg, (void)kshr0, (void)kshr1, (void)robust, (void)motion_term;
+  out.contact = out.robust = 0;
   out.scalar = ~0u;  // never reached: vfLanesEnabled() is false
 #endif
 }

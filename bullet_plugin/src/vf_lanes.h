@@ -38,11 +38,13 @@ struct VfLanesOut {
   alignas(32) float margin[kVfLanes];                          ///< m_margin
   alignas(32) float cfm0[kVfLanes], cfm1[kVfLanes];            ///< m_cfm
   std::uint32_t contact = 0;  ///< bit i: Process pushes a contact for lane i
-  /// Bit i: lane i needs the scalar path. Process would accept without ever having set its
-  /// projection point (only when the radius squared overflows to infinity), or, for Robust, the
-  /// node lies on the face (distance 0) or Bullet's thresholds skipped a face or an edge
-  /// (bulletProjectOrigin's `skipped`) and the pair is beyond Bullet's radius.
+  /// Bit i: lane i needs the whole scalar test: Process would accept without ever having set its
+  /// projection point (only when the radius squared overflows to infinity).
   std::uint32_t scalar = 0;
+  /// Bit i (with `robust` only, never with `scalar`): Robust's own contact decides lane i, at
+  /// radius margin[i]: the node lies on the face (distance 0), or Bullet's thresholds skipped a
+  /// face or an edge (bulletProjectOrigin's `skipped`) and the pair is beyond Bullet's radius.
+  std::uint32_t robust = 0;
 };
 
 /// True when this processor runs the AVX kernel (and tests have not switched it off).
@@ -52,7 +54,8 @@ void allowVfLanes(bool allowed);
 
 /// Runs the eight lanes. `mrg`: the contact radius without motion (CollideVF_SS::mrg); `kshr0` /
 /// `kshr1`: m_cfg.kSHR of the node's and the face's body. `robust`: also flag Robust's lanes in
-/// `scalar`. Only call when vfLanesEnabled().
-void vfLanes(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust, VfLanesOut& out);
+/// `scalar`. `motion_term` false: the radius is mrg alone (Continuous's discrete test), not
+/// mrg + 2·|m_x − m_q|. Only call when vfLanesEnabled().
+void vfLanes(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust, bool motion_term, VfLanesOut& out);
 
 }  // namespace psc::bullet::detail

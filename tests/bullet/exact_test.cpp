@@ -251,8 +251,21 @@ TEST(ExactTests, LanesAreBulletsTestBitForBit) {
     ASSERT_TRUE(psc_test::sameContact(robust_lanes[i], robust_scalar[i])) << "robust contact " << i;
   EXPECT_EQ(lanes_counts.robust, scalar_counts.robust);
   EXPECT_GT(lanes_counts.robust, 100u);  // Robust's own lanes (small faces, nodes on a face) were exercised
-  std::printf("lanes: %zu Bullet contacts, %zu Robust contacts (%zu of Robust's own) of %zu pairs, equal bit for bit\n",
-              lanes.size(), robust_lanes.size(), lanes_counts.robust, rig.candidates.size());
+
+  // Continuous: the lanes decide its discrete part (margins alone), the crossing test follows.
+  const auto continuous_lanes = rig.run(ExactTest::Continuous, true, lanes_counts);
+  const auto continuous_scalar = rig.run(ExactTest::Continuous, false, scalar_counts);
+  ASSERT_EQ(continuous_lanes.size(), continuous_scalar.size());
+  for (std::size_t i = 0; i < continuous_lanes.size(); ++i)
+    ASSERT_TRUE(psc_test::sameContact(continuous_lanes[i], continuous_scalar[i])) << "continuous contact " << i;
+  EXPECT_EQ(lanes_counts.robust, scalar_counts.robust);
+  EXPECT_EQ(lanes_counts.crossings, scalar_counts.crossings);
+  EXPECT_EQ(lanes_counts.turned, scalar_counts.turned);
+  EXPECT_EQ(lanes_counts.dropped, scalar_counts.dropped);
+  EXPECT_GT(lanes_counts.crossings, 50u);
+  std::printf("lanes: %zu Bullet contacts, %zu Robust contacts, %zu Continuous contacts (%zu crossings) of %zu pairs, "
+              "equal bit for bit\n", lanes.size(), robust_lanes.size(), continuous_lanes.size(), lanes_counts.crossings,
+              rig.candidates.size());
 }
 
 TEST(ExactTests, RobustFindsTheExactContactOnSmallFacesAtAnyScale) {
