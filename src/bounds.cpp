@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #if defined(__SSE2__)
@@ -209,6 +210,12 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
   box.assign(chunks, {_mm_set1_ps(inf), _mm_setr_ps(-inf, -inf, -inf, 0.0f)});
   // The same stride and records less than a cache line apart: one prefetch brings both.
   const bool prev_apart = prev != nullptr && (prev_stride != stride || std::abs(prev - base) >= 64);
+  // Two floats (x, y) into the low lanes: positions are only 4-byte aligned, so no double load.
+  const auto load2 = [](const float* at) {
+    double xy;
+    std::memcpy(&xy, at, sizeof xy);
+    return _mm_castpd_ps(_mm_set_sd(xy));
+  };
   __m128 nan = _mm_setzero_ps();
   for (std::size_t v = 0; v < n; ++v) {
     __builtin_prefetch(base + (v + 24) * stride);
@@ -217,14 +224,14 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
     if (c == kInvalidIndex) continue;
     // x, y and z without reading past them (the view's records may end right after z).
     const float* p = reinterpret_cast<const float*>(base + v * stride);
-    const __m128 xy = _mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(p)));
+    const __m128 xy = load2(p);
     const __m128 z = _mm_load_ss(p + 2);
     const __m128 xv = _mm_movelh_ps(xy, z);  // (x, y, z, 0)
     nan = _mm_or_ps(nan, _mm_cmpunord_ps(xv, xv));
     __m128 xm = xv;
     if (prev != nullptr) {
       const float* q = reinterpret_cast<const float*>(prev + v * prev_stride);
-      const __m128 qv = _mm_movelh_ps(_mm_castpd_ps(_mm_load_sd(reinterpret_cast<const double*>(q))), _mm_load_ss(q + 2));
+      const __m128 qv = _mm_movelh_ps(load2(q), _mm_load_ss(q + 2));
       nan = _mm_or_ps(nan, _mm_cmpunord_ps(qv, qv));
       const __m128 d = _mm_sub_ps(xv, qv);
       const __m128 d2 = _mm_mul_ps(d, d);
