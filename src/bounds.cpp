@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 
@@ -209,7 +210,10 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
   const float inf = std::numeric_limits<float>::infinity();
   box.assign(chunks, {_mm_set1_ps(inf), _mm_setr_ps(-inf, -inf, -inf, 0.0f)});
   // The same stride and records less than a cache line apart: one prefetch brings both.
-  const bool prev_apart = prev != nullptr && (prev_stride != stride || std::abs(prev - base) >= 64);
+  const auto address = [](const char* at) { return reinterpret_cast<std::uintptr_t>(at); };
+  const bool prev_apart = prev != nullptr && (prev_stride != stride || (address(prev) > address(base)
+                                                                             ? address(prev) - address(base)
+                                                                             : address(base) - address(prev)) >= 64);
   // Two floats (x, y) into the low lanes: positions are only 4-byte aligned, so no double load.
   const auto load2 = [](const float* at) {
     double xy;
