@@ -67,6 +67,19 @@ struct PairContext {
 
 /// The fields CollideVF_SS fills after its distance test, for weights w and normal `normal`.
 /// False (no contact) when neither side can move, as in Bullet.
+/// Every field of a contact, as CollideVF_SS sets them, the constraint mixing already computed.
+void setContact(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face, const btVector3& w,
+                const btVector3& normal, btScalar margin, btScalar cfm0, btScalar cfm1, btSoftBody::SContact& c) {
+  c.m_normal = normal;
+  c.m_margin = margin;
+  c.m_node = const_cast<btSoftBody::Node*>(&node);
+  c.m_face = const_cast<btSoftBody::Face*>(&face);
+  c.m_weights = w;
+  c.m_friction = btMax(ctx.psb[0]->m_cfg.kDF, ctx.psb[1]->m_cfg.kDF);
+  c.m_cfm[0] = cfm0;
+  c.m_cfm[1] = cfm1;
+}
+
 bool fillContact(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
                  const btVector3& w, const btVector3& normal, btScalar margin, btSoftBody::SContact& c) {
   const btSoftBody::Node* n[] = {face.m_n[0], face.m_n[1], face.m_n[2]};
@@ -75,14 +88,7 @@ bool fillContact(const PairContext& ctx, const btSoftBody::Node& node, const btS
   if ((n[0]->m_im <= 0) || (n[1]->m_im <= 0) || (n[2]->m_im <= 0)) mb = 0;
   const btScalar ms = ma + mb;
   if (!(ms > 0)) return false;
-  c.m_normal = normal;
-  c.m_margin = margin;
-  c.m_node = const_cast<btSoftBody::Node*>(&node);
-  c.m_face = const_cast<btSoftBody::Face*>(&face);
-  c.m_weights = w;
-  c.m_friction = btMax(ctx.psb[0]->m_cfg.kDF, ctx.psb[1]->m_cfg.kDF);
-  c.m_cfm[0] = ma / ms * ctx.psb[0]->m_cfg.kSHR;
-  c.m_cfm[1] = mb / ms * ctx.psb[1]->m_cfg.kSHR;
+  setContact(ctx, node, face, w, normal, margin, ma / ms * ctx.psb[0]->m_cfg.kSHR, mb / ms * ctx.psb[1]->m_cfg.kSHR, c);
   return true;
 }
 
@@ -279,7 +285,6 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
   const bool continuous = test == ExactTest::Continuous;
   const btSoftBody::Node* nodes = &node_body.m_nodes[0];
   const btSoftBody::Face* faces = &face_body.m_faces[0];
-  const btScalar friction = btMax(node_body.m_cfg.kDF, face_body.m_cfg.kDF);
   btSoftColliders::CollideVF_SS collide;
   collide.mrg = ctx.mrg;
   collide.psb[0] = &node_body;
@@ -341,14 +346,8 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
       } else if (out.scalar & bit) {
         kind = discrete(node, face);
       } else if (out.contact & bit) {
-        contact.m_normal = btVector3(out.nx[l], out.ny[l], out.nz[l]);
-        contact.m_margin = out.margin[l];
-        contact.m_node = const_cast<btSoftBody::Node*>(&node);
-        contact.m_face = const_cast<btSoftBody::Face*>(&face);
-        contact.m_weights = btVector3(out.wx[l], out.wy[l], out.wz[l]);
-        contact.m_friction = friction;
-        contact.m_cfm[0] = out.cfm0[l];
-        contact.m_cfm[1] = out.cfm1[l];
+        setContact(ctx, node, face, btVector3(out.wx[l], out.wy[l], out.wz[l]), btVector3(out.nx[l], out.ny[l], out.nz[l]),
+                   out.margin[l], out.cfm0[l], out.cfm1[l], contact);
         kind = ContactKind::Bullet;
       }
       finish(node, face, kind);

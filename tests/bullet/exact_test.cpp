@@ -213,6 +213,15 @@ struct BatchRig {
   }
 };
 
+/// Equal length and every contact equal bit for bit; names the first that differs.
+::testing::AssertionResult sameContacts(const std::vector<btSoftBody::SContact>& a,
+                                        const std::vector<btSoftBody::SContact>& b) {
+  if (a.size() != b.size()) return ::testing::AssertionFailure() << a.size() << " contacts against " << b.size();
+  for (std::size_t i = 0; i < a.size(); ++i)
+    if (!psc_test::sameContact(a[i], b[i])) return ::testing::AssertionFailure() << "contact " << i << " differs";
+  return ::testing::AssertionSuccess();
+}
+
 TEST(ExactTests, LanesAreBulletsTestBitForBit) {
   // The exact stage runs Bullet's test eight pairs at a time with AVX (bullet_plugin/src/vf_lanes.h).
   // It must push the very contacts CollideVF_SS::Process pushes, in the same order, and Robust's
@@ -224,8 +233,7 @@ TEST(ExactTests, LanesAreBulletsTestBitForBit) {
   psc::bullet::ExactCounts lanes_counts, scalar_counts;
   const auto lanes = rig.run(ExactTest::Bullet, true, lanes_counts);
   const auto scalar = rig.run(ExactTest::Bullet, false, scalar_counts);
-  ASSERT_EQ(lanes.size(), scalar.size());
-  for (std::size_t i = 0; i < lanes.size(); ++i) ASSERT_TRUE(psc_test::sameContact(lanes[i], scalar[i])) << "contact " << i;
+  ASSERT_TRUE(sameContacts(lanes, scalar));
   // The scalar run is Process itself, pair by pair:
   btSoftColliders::CollideVF_SS collide;
   collide.mrg = btScalar(0.05);
@@ -238,26 +246,22 @@ TEST(ExactTests, LanesAreBulletsTestBitForBit) {
     face_leaf.data = &rig.face_body.m_faces[int(c.triangle)];
     collide.Process(&node_leaf, &face_leaf);
   }
-  ASSERT_EQ(rig.node_body.m_scontacts.size(), int(lanes.size()));
-  for (std::size_t i = 0; i < lanes.size(); ++i)
-    ASSERT_TRUE(psc_test::sameContact(lanes[i], rig.node_body.m_scontacts[int(i)])) << "contact " << i;
+  std::vector<btSoftBody::SContact> process(std::size_t(rig.node_body.m_scontacts.size()));
+  for (std::size_t i = 0; i < process.size(); ++i) process[i] = rig.node_body.m_scontacts[int(i)];
+  ASSERT_TRUE(sameContacts(lanes, process));
   EXPECT_GT(lanes.size(), 2000u);
   EXPECT_LT(lanes.size(), 8000u);
 
   const auto robust_lanes = rig.run(ExactTest::Robust, true, lanes_counts);
   const auto robust_scalar = rig.run(ExactTest::Robust, false, scalar_counts);
-  ASSERT_EQ(robust_lanes.size(), robust_scalar.size());
-  for (std::size_t i = 0; i < robust_lanes.size(); ++i)
-    ASSERT_TRUE(psc_test::sameContact(robust_lanes[i], robust_scalar[i])) << "robust contact " << i;
+  ASSERT_TRUE(sameContacts(robust_lanes, robust_scalar)) << "Robust";
   EXPECT_EQ(lanes_counts.robust, scalar_counts.robust);
   EXPECT_GT(lanes_counts.robust, 100u);  // Robust's own lanes (small faces, nodes on a face) were exercised
 
   // Continuous: the lanes decide its discrete part (margins alone), the crossing test follows.
   const auto continuous_lanes = rig.run(ExactTest::Continuous, true, lanes_counts);
   const auto continuous_scalar = rig.run(ExactTest::Continuous, false, scalar_counts);
-  ASSERT_EQ(continuous_lanes.size(), continuous_scalar.size());
-  for (std::size_t i = 0; i < continuous_lanes.size(); ++i)
-    ASSERT_TRUE(psc_test::sameContact(continuous_lanes[i], continuous_scalar[i])) << "continuous contact " << i;
+  ASSERT_TRUE(sameContacts(continuous_lanes, continuous_scalar)) << "Continuous";
   EXPECT_EQ(lanes_counts.robust, scalar_counts.robust);
   EXPECT_EQ(lanes_counts.crossings, scalar_counts.crossings);
   EXPECT_EQ(lanes_counts.turned, scalar_counts.turned);
