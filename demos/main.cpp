@@ -68,7 +68,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> scenes;
   SceneParams params;
   std::size_t steps = 0, warmup = 0, frame_every = 1;
-  std::string pipeline = "both", flagging = "default", truth = "both", exact = "bullet", json, csv, frames, plot_dir;
+  std::string pipeline = "both", flagging = "default", truth = "both", exact = "bullet", motion_bound = "radius", json, csv, frames, plot_dir;
   std::vector<std::string> sweep, bullet_clusters;
   bool list = false, no_penetration = false, self_collision = false, refit_in_step = false;
   app.add_option("--scene", scenes, "scene name or number, repeatable, or 'all' (default: all; see --list-scenes)");
@@ -94,6 +94,12 @@ int main(int argc, char** argv) {
                  "scale) or continuous (robust + crossings during the step); default bullet. Bullet's own "
                  "pipeline always uses Bullet's test")
       ->check(CLI::IsMember({"bullet", "robust", "continuous"}));
+  app.add_option("--motion-bound", motion_bound,
+                 "our pipelines' motion bound with --exact bullet or robust: radius (the default: every pair "
+                 "inside Bullet's radius margins + 2|dx|) or ahead (of those, the pairs within the margins or "
+                 "that the node and the face head into over the next two steps); --exact continuous always "
+                 "uses the swept bound")
+      ->check(CLI::IsMember({"ahead", "radius"}));
   app.add_option("--truth", truth, "ground truth: none, strict, full or both (default both)")
       ->check(CLI::IsMember({"none", "strict", "full", "both"}));
   app.add_option("--mesh", params.mesh_file, "OBJ/OFF/PLY/STL file for scene 8 ('mesh'); alone it selects scene 8");
@@ -174,6 +180,7 @@ int main(int argc, char** argv) {
                                             : TruthMode::Both;
     options.run.penetration = !no_penetration;
     options.run.exact = exact;
+    options.run.motion_bound = motion_bound;
     options.run.self_collision = self_collision;
     options.run.refit_after_predict = !refit_in_step;
     options.run.frames_dir = frames;

@@ -112,6 +112,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["steps"] = r.steps;
   j["pipeline"] = runName(r);
   j["exact"] = r.exact;
+  if (!r.motion_bound.empty()) j["motion_bound"] = r.motion_bound;
   if (r.has_strict) {
     j["recall_strict"] = r.recall_strict;
     j["recall_strict_worst_step"] = r.recall_strict_worst_step;

@@ -70,6 +70,9 @@ struct RunOptions {
   std::size_t warmup = 0;        ///< steps left out of the timing; 0 = min(10, max(1, steps/10))
   FlaggingMode flagging = FlaggingMode::Default;  ///< for the sensors pipeline
   std::string exact = "bullet";  ///< the sensors' exact test: bullet, robust or continuous (psc::bullet::ExactTest)
+  /// Our pipelines' psc::MotionBound: "radius" (the plugin's default) or "ahead"; with exact =
+  /// "continuous" the plugin uses the swept bound whatever this says.
+  std::string motion_bound = "radius";
   /// Self-collision on every body of our pipelines (psc::bullet::Settings::self_collision), and the
   /// self truth for every pipeline. Bullet's own pipeline has none and stays as it is.
   bool self_collision = false;
@@ -92,6 +95,7 @@ struct RunResult {
   Pipeline pipeline = Pipeline::Bullet;
   std::string flagging;           ///< ours: "default", "thesis" or "bounds"; empty for Bullet's
   std::string exact = "bullet";   ///< exact test of the run (Bullet's own pipeline: always bullet)
+  std::string motion_bound;       ///< ours: "ahead", "radius" or "swept" (continuous); empty for Bullet's
   bool self_collision = false;    ///< the pipeline itself: ours with RunOptions::self_collision, Bullet's cluster runs
   int bullet_clusters = 0;        ///< RunOptions::bullet_clusters (0: not a cluster run)
   bool cluster_self_direct = false;

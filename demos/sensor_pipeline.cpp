@@ -24,12 +24,15 @@ bool SensorPipeline::available() { return true; }
 int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
 
 SensorPipeline::SensorPipeline(SceneWorld& world, psc::Flagging flagging, const std::string& exact,
-                               bool self_collision, bool refit_after_predict) {
+                               const std::string& motion_bound, bool self_collision, bool refit_after_predict) {
   psc::bullet::Settings settings;
   settings.opt_in = psc::bullet::OptIn::Explicit;
   settings.sensors.flagging = flagging;
   settings.self_collision = self_collision;
   settings.exact = psc::bullet::exactTestFromString(exact);
+  if (motion_bound == "radius") settings.sensors.motion_bound = psc::MotionBound::Radius;
+  else if (motion_bound == "ahead") settings.sensors.motion_bound = psc::MotionBound::Ahead;
+  else throw psc::Error(psc::ErrorCode::InvalidArgument, "motion bound '" + motion_bound + "' is not one of radius, ahead");
   impl_ = std::make_shared<Impl>(world, psc::bullet::install(world.world(), settings));
   for (btSoftBody* body : world.softBodies()) impl_->plugin.setEnabled(body, true);
   if (refit_after_predict) {
@@ -122,7 +125,7 @@ SensorView SensorPipeline::view() const {
 struct SensorPipeline::Impl {};
 bool SensorPipeline::available() { return false; }
 int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
-SensorPipeline::SensorPipeline(SceneWorld&, psc::Flagging, const std::string&, bool, bool) {
+SensorPipeline::SensorPipeline(SceneWorld&, psc::Flagging, const std::string&, const std::string&, bool, bool) {
   throw Error(ErrorCode::InvalidArgument, "this psc_demo was built without psc::bullet: use --pipeline bullet");
 }
 SensorPipeline::~SensorPipeline() = default;

@@ -35,13 +35,16 @@ class SensorPipeline {
   /// `flagging` goes to Settings::sensors.flagging: SensorsAndBounds (the default), Bounds (the
   /// ablation: boxes only) or Sensors (the thesis's flag-only mode). `exact`: the plugin's exact
   /// test, "bullet", "robust" or "continuous" (psc::bullet::ExactTest); anything else throws
-  /// psc::Error(InvalidArgument). `self_collision`: Settings::self_collision, every body against
+  /// psc::Error(InvalidArgument). `motion_bound`: Settings::sensors.motion_bound, "radius" (the
+  /// default, MotionBound::Radius) or "ahead" (MotionBound::Ahead); exact = "continuous"
+  /// uses MotionBound::Swept whatever it says. `self_collision`: Settings::self_collision, every body against
   /// itself too (its rest shape: its positions at the plugin's first step). `refit_after_predict`:
   /// the world's solver calls Plugin::afterPredictMotion after each body's predictMotion (what
   /// psc::bullet::SoftBodySolver does), so the sensors refit each body while its nodes are warm;
   /// false: every body is refit in the sensor step, at the first soft-soft pair.
   explicit SensorPipeline(SceneWorld& world, psc::Flagging flagging = psc::Flagging::SensorsAndBounds,
-                          const std::string& exact = "bullet", bool self_collision = false,
+                          const std::string& exact = "bullet", const std::string& motion_bound = "radius",
+                          bool self_collision = false,
                           bool refit_after_predict = true);
   ~SensorPipeline();
 

@@ -613,6 +613,16 @@ struct VertexRec {
   double xn;  ///< projection on the sensor axis
   Index v;
   double reach2;  ///< MotionBound::Radius: squared distance below which a triangle is kept (reachOf)
+  /// MotionBound::Ahead: where the vertex's path ahead ends, x + f·Δx (f = motion_factor); x otherwise.
+  Vec3 ahead = Vec3::Zero();
+};
+
+/// What a probe tests against a triangle's box: the box [lo, hi] grown by r in every direction
+/// (rounded: the distance between the two boxes at most r). A vertex's ball is lo = hi = its centre;
+/// with MotionBound::Ahead the box of its path ahead with r = the margins.
+struct Probe {
+  Vec3 lo, hi;
+  double r;
 };
 
 /// With MotionBound::Radius a pair is kept when the vertex lies within its radius r of the
@@ -710,6 +720,9 @@ struct PairContext {
   /// vb == tb with the self motion term (RestFit::mean_motion): a vertex's motion term is
   /// selfMotion of its displacement against it.
   const Vec3* self_mean_motion = nullptr;
+  /// MotionBound::Ahead (two-body pairs): the probes test the paths ahead, the exact distance the
+  /// radius; with it `motion_factor` is the number of steps ahead.
+  bool ahead = false;
 };
 
 /// Self-collision's exclusion rule: the triangle holds the vertex, or the two were within the
@@ -742,7 +755,9 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
       r = ctx.margin_sum + 0.5 * (x - q).norm();
       x = 0.5 * (x + q);
     }
-    ctx.s.verts.push_back({x, r, ctx.axis.valid ? ctx.axis.project(x) : 0.0, v, swept ? 0.0 : reachOf(x, r)});
+    VertexRec rec{x, r, ctx.axis.valid ? ctx.axis.project(x) : 0.0, v, swept ? 0.0 : reachOf(x, r)};
+    rec.ahead = ctx.ahead && !ctx.vb.previous.empty() ? Vec3(x + ctx.motion_factor * (x - ctx.vb.previous[v])) : x;
+    ctx.s.verts.push_back(rec);
   }
   ctx.counters.candidate_vertices += ctx.vb.chunks.vertices(c.chunk).size();
 }
@@ -774,6 +789,19 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
         }
       }
     }
+    if (ctx.ahead && !ctx.tb.previous.empty()) {  // the box of its corners now and motion_factor steps ahead
+      for (Index k : tri) {
+        const Vec3 x = ctx.tb.positions[k];
+        const Vec3 p = x + ctx.motion_factor * (x - ctx.tb.previous[k]);
+        rec.lo = rec.lo.cwiseMin(p);
+        rec.hi = rec.hi.cwiseMax(p);
+        if (ctx.axis.valid) {
+          const double pp = ctx.axis.project(p);
+          rec.nlo = std::min(rec.nlo, pp);
+          rec.nhi = std::max(rec.nhi, pp);
+        }
+      }
+    }
     ctx.s.tris.push_back(rec);
     ctx.s.corners.push_back({a, b, cc, ch.triangleId(c.chunk, at), static_cast<Index>(at)});
   }
@@ -782,11 +810,11 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
 
 /// The scalar test of kept triangle j (the vector loops' tail): the vertex's ball meets its box and
 /// [n_lo, n_hi] meets its extent along the sensor axis.
-bool meetsScalar(const KeptTriangles& kept, std::size_t j, const VertexRec& vr, double n_lo, double n_hi) {
-  const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
-  const double dx = std::max(0.0, std::max(kept.lo_x[j] - x, x - kept.hi_x[j]));
-  const double dy = std::max(0.0, std::max(kept.lo_y[j] - y, y - kept.hi_y[j]));
-  const double dz = std::max(0.0, std::max(kept.lo_z[j] - z, z - kept.hi_z[j]));
+bool meetsScalar(const KeptTriangles& kept, std::size_t j, const Probe& pr, double n_lo, double n_hi) {
+  const double r2 = pr.r * pr.r;
+  const double dx = std::max(0.0, std::max(kept.lo_x[j] - pr.hi.x(), pr.lo.x() - kept.hi_x[j]));
+  const double dy = std::max(0.0, std::max(kept.lo_y[j] - pr.hi.y(), pr.lo.y() - kept.hi_y[j]));
+  const double dz = std::max(0.0, std::max(kept.lo_z[j] - pr.hi.z(), pr.lo.z() - kept.hi_z[j]));
   return dx * dx + dy * dy + dz * dz <= r2 && n_hi >= kept.n_lo[j] && n_lo <= kept.n_hi[j];
 }
 
@@ -812,7 +840,7 @@ std::size_t gatherMarked(const KeptTriangles& kept, const unsigned char* meets, 
 /// so the rule excludes the pair). Most self pairs the boxes keep are such neighbours, so passes
 /// are rare there and the loop gathers at once behind a branch that is almost never taken.
 template <bool kSelf>
-std::size_t collectMeets(const KeptTriangles& kept, const VertexRec& vr, double n_lo, double n_hi, const Vec3& rest,
+std::size_t collectMeets(const KeptTriangles& kept, const Probe& pr, double n_lo, double n_hi, const Vec3& rest,
                          double exclude2, unsigned char* meets, Index* hits) {
   const std::size_t m = kept.size();
   const Index* record = kept.record.data();
@@ -822,18 +850,20 @@ std::size_t collectMeets(const KeptTriangles& kept, const VertexRec& vr, double 
 #if defined(__SSE2__)
   // SSE2 is part of x86-64; the same tests as meetsScalar.
   {
-    const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
+    const double r2 = pr.r * pr.r;
     const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
     const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
     const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
-    const __m128d vx = _mm_set1_pd(x), vy = _mm_set1_pd(y), vz = _mm_set1_pd(z), vr2 = _mm_set1_pd(r2);
+    const __m128d lox = _mm_set1_pd(pr.lo.x()), loy = _mm_set1_pd(pr.lo.y()), loz = _mm_set1_pd(pr.lo.z());
+    const __m128d hix = _mm_set1_pd(pr.hi.x()), hiy = _mm_set1_pd(pr.hi.y()), hiz = _mm_set1_pd(pr.hi.z());
+    const __m128d vr2 = _mm_set1_pd(r2);
     const __m128d vnl = _mm_set1_pd(n_lo), vnh = _mm_set1_pd(n_hi), zero = _mm_setzero_pd();
     const __m128d px = _mm_set1_pd(rest.x()), py = _mm_set1_pd(rest.y()), pz = _mm_set1_pd(rest.z());
     const __m128d e2 = _mm_set1_pd(exclude2);
     for (; j + 2 <= m; j += 2) {
-      const __m128d dx = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(lx + j), vx), _mm_sub_pd(vx, _mm_loadu_pd(hx + j))));
-      const __m128d dy = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(ly + j), vy), _mm_sub_pd(vy, _mm_loadu_pd(hy + j))));
-      const __m128d dz = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(lz + j), vz), _mm_sub_pd(vz, _mm_loadu_pd(hz + j))));
+      const __m128d dx = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(lx + j), hix), _mm_sub_pd(lox, _mm_loadu_pd(hx + j))));
+      const __m128d dy = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(ly + j), hiy), _mm_sub_pd(loy, _mm_loadu_pd(hy + j))));
+      const __m128d dz = _mm_max_pd(zero, _mm_max_pd(_mm_sub_pd(_mm_loadu_pd(lz + j), hiz), _mm_sub_pd(loz, _mm_loadu_pd(hz + j))));
       const __m128d d2 = _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy)), _mm_mul_pd(dz, dz));
       __m128d ok = _mm_and_pd(_mm_cmple_pd(d2, vr2), _mm_and_pd(_mm_cmpge_pd(vnh, _mm_loadu_pd(tnl + j)),
                                                                 _mm_cmple_pd(vnl, _mm_loadu_pd(tnh + j))));
@@ -857,7 +887,7 @@ std::size_t collectMeets(const KeptTriangles& kept, const VertexRec& vr, double 
   }
 #endif
   for (; j < m; ++j) {
-    const bool ok = meetsScalar(kept, j, vr, n_lo, n_hi);
+    const bool ok = meetsScalar(kept, j, pr, n_lo, n_hi);
     if constexpr (kSelf) {
       if (ok && (Vec3(gx[j], gy[j], gz[j]) - rest).squaredNorm() >= exclude2) hits[n_hits++] = record[j];
     } else {
@@ -873,24 +903,26 @@ std::size_t collectMeets(const KeptTriangles& kept, const VertexRec& vr, double 
 /// collectMeets<false> four triangles per instruction, for processors with AVX2 (chosen at run
 /// time). The same operations in the same order as the SSE2 loop, without fused multiply-adds, so
 /// the same triangles pass.
-[[gnu::target("avx2")]] std::size_t collectMeetsAvx2(const KeptTriangles& kept, const VertexRec& vr, double n_lo,
+[[gnu::target("avx2")]] std::size_t collectMeetsAvx2(const KeptTriangles& kept, const Probe& pr, double n_lo,
                                                      double n_hi, unsigned char* meets, Index* hits) {
   const std::size_t m = kept.size();
-  const double x = vr.x.x(), y = vr.x.y(), z = vr.x.z(), r2 = vr.r * vr.r;
+  const double r2 = pr.r * pr.r;
   const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
   const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
   const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
-  const __m256d vx = _mm256_set1_pd(x), vy = _mm256_set1_pd(y), vz = _mm256_set1_pd(z), vr2 = _mm256_set1_pd(r2);
+  const __m256d lox = _mm256_set1_pd(pr.lo.x()), loy = _mm256_set1_pd(pr.lo.y()), loz = _mm256_set1_pd(pr.lo.z());
+  const __m256d hix = _mm256_set1_pd(pr.hi.x()), hiy = _mm256_set1_pd(pr.hi.y()), hiz = _mm256_set1_pd(pr.hi.z());
+  const __m256d vr2 = _mm256_set1_pd(r2);
   const __m256d vnl = _mm256_set1_pd(n_lo), vnh = _mm256_set1_pd(n_hi), zero = _mm256_setzero_pd();
   std::size_t j = 0;
   int any = 0;
   for (; j + 4 <= m; j += 4) {
     const __m256d dx = _mm256_max_pd(
-        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lx + j), vx), _mm256_sub_pd(vx, _mm256_loadu_pd(hx + j))));
+        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lx + j), hix), _mm256_sub_pd(lox, _mm256_loadu_pd(hx + j))));
     const __m256d dy = _mm256_max_pd(
-        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(ly + j), vy), _mm256_sub_pd(vy, _mm256_loadu_pd(hy + j))));
+        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(ly + j), hiy), _mm256_sub_pd(loy, _mm256_loadu_pd(hy + j))));
     const __m256d dz = _mm256_max_pd(
-        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lz + j), vz), _mm256_sub_pd(vz, _mm256_loadu_pd(hz + j))));
+        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lz + j), hiz), _mm256_sub_pd(loz, _mm256_loadu_pd(hz + j))));
     const __m256d d2 =
         _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz));
     const __m256d ok = _mm256_and_pd(
@@ -911,7 +943,7 @@ std::size_t collectMeets(const KeptTriangles& kept, const VertexRec& vr, double 
   // clean, 0.78 ms without).
   _mm256_zeroupper();
   for (; j < m; ++j) {
-    const bool ok = meetsScalar(kept, j, vr, n_lo, n_hi);
+    const bool ok = meetsScalar(kept, j, pr, n_lo, n_hi);
     any |= static_cast<int>(ok);
     meets[j] = ok;
   }
@@ -984,18 +1016,30 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     const KeptTriangles& kept = s.kept;
     const std::size_t m = kept.size();
     probes += m;
-    const double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
-    const double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
+    // The vertex's ball; with MotionBound::Ahead the box of its path ahead, grown by the margins
+    // (the picking above and the distance below keep the ball (x, r), which holds every pair the
+    // path ahead can keep that is within Bullet's radius).
+    Probe pr{vr.x, vr.x, vr.r};
+    double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
+    double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
+    if (ctx.ahead) {
+      pr = Probe{vr.x.cwiseMin(vr.ahead), vr.x.cwiseMax(vr.ahead), ctx.margin_sum};
+      if (sensors) {
+        const double an = ctx.axis.project(vr.ahead);
+        n_lo = std::min(vr.xn, an) - ctx.margin_sum;
+        n_hi = std::max(vr.xn, an) + ctx.margin_sum;
+      }
+    }
     Index* hits = s.hits.data();
     std::size_t n_hits = 0;
     if (self)
-      n_hits = collectMeets<true>(kept, vr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, s.kept.meets.data(), hits);
+      n_hits = collectMeets<true>(kept, pr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, s.kept.meets.data(), hits);
 #if defined(PSC_HAVE_AVX2_PATH)
     else if (avx2)
-      n_hits = collectMeetsAvx2(kept, vr, n_lo, n_hi, s.kept.meets.data(), hits);
+      n_hits = collectMeetsAvx2(kept, pr, n_lo, n_hi, s.kept.meets.data(), hits);
 #endif
     else
-      n_hits = collectMeets<false>(kept, vr, n_lo, n_hi, Vec3::Zero(), 0.0, s.kept.meets.data(), hits);
+      n_hits = collectMeets<false>(kept, pr, n_lo, n_hi, Vec3::Zero(), 0.0, s.kept.meets.data(), hits);
     for (std::size_t h = 0; h < n_hits; ++h) {
       const Index k = hits[h];
       const TriangleCorners& tc = s.corners[k];
@@ -1259,8 +1303,10 @@ class Collector {
     flagged_.push_back(f);
 
     const auto t0 = std::chrono::steady_clock::now();
-    const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab_keys, counters_, s_};
-    const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba_keys, counters_, s_};
+    const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab_keys, counters_, s_,
+                           -1.0, nullptr, params_.ahead};
+    const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba_keys, counters_, s_,
+                           -1.0, nullptr, params_.ahead};
     const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
     s_.items_a.clear();
     s_.items_b.clear();

@@ -30,6 +30,7 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit = false);
 struct CullParams {
   double motion_factor = 2.0;  ///< MotionBound::Radius; 0 with `swept`
   bool swept = false;          ///< MotionBound::Swept
+  bool ahead = false;          ///< MotionBound::Ahead: two-body probes against the paths ahead
   bool use_sensors = true;     ///< false: Flagging::Bounds (the ablation)
   double self_rest_exclusion = 2.0;  ///< SensorSettings::self_rest_exclusion
   double self_radius_edges = 1.0;    ///< SensorSettings::self_radius_edges

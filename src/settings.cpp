@@ -23,8 +23,9 @@ void validate(const SensorSettings& s) {
   if (s.rounds_per_step < 0) bad("rounds_per_step", s.rounds_per_step, "must be at least 0 (0 = until stable)");
   if (!std::isfinite(s.motion_factor) || s.motion_factor < 0.0)
     bad("motion_factor", s.motion_factor, "must be finite and not negative");
-  if (s.motion_bound != MotionBound::Radius && s.motion_bound != MotionBound::Swept)
-    bad("motion_bound", static_cast<double>(s.motion_bound), "must be MotionBound::Radius or MotionBound::Swept");
+  if (s.motion_bound != MotionBound::Radius && s.motion_bound != MotionBound::Swept &&
+      s.motion_bound != MotionBound::Ahead)
+    bad("motion_bound", static_cast<double>(s.motion_bound), "must be MotionBound::Radius, Swept or Ahead");
   if (s.motion_bound == MotionBound::Swept && s.flagging == Flagging::Sensors)
     throw Error(ErrorCode::InvalidSettings,
                 "motion_bound = Swept is not supported with flagging = Sensors (the thesis's flag-only mode)");

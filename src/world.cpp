@@ -94,7 +94,7 @@ struct SensorWorld::Impl {
   /// Whether the refit carries b's self-collision part (the rest-shape bound and the self motion
   /// term): what the self-collision cull reads with MotionBound::Radius in the default midphase.
   bool restFitOn(const Body& b) const {
-    return b.selfCollides() && settings.motion_bound == MotionBound::Radius && settings.flagging != Flagging::Sensors;
+    return b.selfCollides() && settings.motion_bound != MotionBound::Swept && settings.flagging != Flagging::Sensors;
   }
   void moveParticles(StepStats& stats, double r_eff);
   const std::vector<Index>& ringOf(std::size_t particle, const Body& b, Index region, Index v);
@@ -502,6 +502,7 @@ const StepResult& SensorWorld::step() {
   detail::CullParams params;
   params.swept = w.settings.motion_bound == MotionBound::Swept;
   params.motion_factor = params.swept ? 0.0 : w.settings.motion_factor;
+  params.ahead = w.settings.motion_bound == MotionBound::Ahead;
   params.use_sensors = w.settings.flagging == Flagging::SensorsAndBounds;
   params.self_rest_exclusion = w.settings.self_rest_exclusion;
   params.self_radius_edges = w.settings.self_radius_edges;

@@ -32,6 +32,15 @@ enum class MotionBound {
   /// reaches half its step around its path's midpoint instead of twice its step around its end.
   /// Flagging::Sensors (the thesis's mode) does not support it.
   Swept,
+  /// The pairs inside Radius's radius that the motion heads into: the vertex's path ahead over
+  /// motion_factor more steps at its step's displacement (x_v → x_v + motion_factor·(x_v − x_v,prev))
+  /// comes within margin_A + margin_B of the triangle's path ahead (each corner likewise), or the
+  /// vertex already lies within the margins. A subset of Radius's pairs: every pair within the margins,
+  /// every pair the vertex and the triangle would meet in if they kept going, and none of the pairs
+  /// a fast vertex only passes beside or leaves behind, which Bullet's contact response pushes out to
+  /// the whole radius (docs/METHOD.md §5.4). Two-body pairs only; self pairs and Flagging::Sensors
+  /// (the thesis's mode) use Radius.
+  Ahead,
 };
 
 

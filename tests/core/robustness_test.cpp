@@ -694,6 +694,90 @@ TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
   EXPECT_LT(candidates_swept, candidates_radius / 2) << "swept " << candidates_swept << ", radius " << candidates_radius;
 }
 
+TEST(HardConditions, AheadBoundKeepsTheMarginsAndWhatTheMotionHeadsInto) {
+  // A ball flies at a sheet, fast (0.3 per step against margins of 0.02), and through it: of the
+  // pairs inside Bullet's radius (margins + 2|dx|, MotionBound::Radius) the ahead bound must keep
+  // every pair within the margins now and every pair whose paths ahead (x + s·dx, s in [0, 2], for
+  // the vertex and each corner) come within the margins, and nothing Radius does not keep.
+  std::vector<Body> bodies(2);
+  bodies[0].mesh = makePatch(6.0, 6.0, 25, 25);
+  bodies[0].particles = 64;
+  bodies[0].name = "sheet";
+  bodies[1].mesh = makeIcosphere(0.4, 2);
+  bodies[1].name = "ball";
+  for (Body& b : bodies) b.margin = 0.02;
+  const TriMesh sheet_rest = bodies[0].mesh, ball_rest = bodies[1].mesh;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> jitter(-0.02, 0.02);
+  const auto pose = [&](int step, std::vector<Vec3>& sheet, std::vector<Vec3>& ball) {
+    sheet = sheet_rest.vertices;
+    for (Vec3& p : sheet) p += Vec3(jitter(rng), jitter(rng), 0.02 * step + jitter(rng));
+    ball = ball_rest.vertices;
+    for (Vec3& p : ball) p += Vec3(-0.6 + 0.12 * step, 0.1, 1.5 - 0.3 * step) + Vec3(jitter(rng), jitter(rng), jitter(rng));
+  };
+  std::vector<Vec3> prev_sheet, prev_ball;
+  pose(0, prev_sheet, prev_ball);
+  bodies[0].mesh.vertices = prev_sheet;
+  bodies[1].mesh.vertices = prev_ball;
+  SensorSettings settings;
+  settings.motion_bound = MotionBound::Ahead;
+  SensorWorld ahead(settings), radius;
+  addAll(ahead, bodies);
+  for (Body& b : bodies) b.id = radius.addBody(descOf(b));
+  std::size_t within_margins = 0, headed = 0, candidates_ahead = 0, candidates_radius = 0;
+  for (int step = 1; step <= 9; ++step) {
+    std::vector<Vec3> sheet, ball;
+    pose(step, sheet, ball);
+    bodies[0].previous = prev_sheet;
+    bodies[1].previous = prev_ball;
+    bodies[0].mesh.vertices = sheet;
+    bodies[1].mesh.vertices = ball;
+    for (SensorWorld* w : {&ahead, &radius})
+      for (Body& b : bodies)
+        w->setPositions(b.id, PositionView::of(b.mesh.vertices), PositionView::of(b.previous));
+    using Key = std::tuple<BodyId, Index, BodyId, Index>;
+    std::set<Key> kept_ahead, kept_radius;
+    for (const CandidatePair& c : ahead.step().candidates) kept_ahead.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+    for (const CandidatePair& c : radius.step().candidates) kept_radius.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+    candidates_ahead += kept_ahead.size();
+    candidates_radius += kept_radius.size();
+    for (const Key& k : kept_ahead) EXPECT_EQ(kept_radius.count(k), 1u) << "step " << step << ": ahead keeps a pair Radius does not";
+    const double r = bodies[0].margin + bodies[1].margin;
+    for (int i = 0; i < 2; ++i) {
+      const Body &a = bodies[i], &b = bodies[1 - i];
+      for (Index v = 0; v < a.mesh.vertices.size(); ++v) {
+        const double reach = r + 2.0 * (a.mesh.vertices[v] - a.previous[v]).norm();
+        for (Index t = 0; t < b.mesh.triangles.size(); ++t) {
+          const Triangle& tri = b.mesh.triangles[t];
+          const auto at = [&](const Body& x, Index u, double s) {
+            return Vec3(x.mesh.vertices[u] + s * (x.mesh.vertices[u] - x.previous[u]));
+          };
+          const auto distance = [&](double s) {
+            return testkit::pointTriangleDistance(at(a, v, s), at(b, tri[0], s), at(b, tri[1], s), at(b, tri[2], s));
+          };
+          const double now = distance(0.0);
+          if (now >= reach) continue;  // outside Bullet's radius: no bound keeps it
+          bool meets = now < r;
+          within_margins += meets ? 1 : 0;
+          for (int k = 1; k <= 64 && !meets; ++k) {
+            meets = distance(2.0 * k / 64.0) < r;
+            headed += meets ? 1 : 0;
+          }
+          if (!meets) continue;
+          EXPECT_EQ(kept_ahead.count({a.id, v, b.id, t}), 1u)
+              << "step " << step << ": " << a.name << " vertex " << v << " heads into " << b.name << " triangle " << t;
+        }
+      }
+    }
+    prev_sheet = sheet;
+    prev_ball = ball;
+  }
+  EXPECT_GT(within_margins, 20u) << "the ball must touch the sheet";
+  EXPECT_GT(headed, 20u) << "the ball must head into the sheet";
+  // The pairs a fast vertex passes beside or leaves behind are gone.
+  EXPECT_LT(candidates_ahead, candidates_radius / 2) << "ahead " << candidates_ahead << ", radius " << candidates_radius;
+}
+
 TEST(HardConditions, StretchedToTwiceItsSizeRepartitionsAndStillFindsContacts) {
   std::vector<Body> bodies(2);
   bodies[0].mesh = makeSphere(1.0, 400);
