@@ -613,8 +613,6 @@ struct VertexRec {
   double xn;  ///< projection on the sensor axis
   Index v;
   double reach2;  ///< MotionBound::Radius: squared distance below which a triangle is kept (reachOf)
-  /// MotionBound::Ahead: where the vertex's path ahead ends, x + f·Δx (f = motion_factor); x otherwise.
-  Vec3 ahead = Vec3::Zero();
 };
 
 /// What a probe tests against a triangle's box: the box [lo, hi] grown by r in every direction
@@ -755,9 +753,7 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
       r = ctx.margin_sum + 0.5 * (x - q).norm();
       x = 0.5 * (x + q);
     }
-    VertexRec rec{x, r, ctx.axis.valid ? ctx.axis.project(x) : 0.0, v, swept ? 0.0 : reachOf(x, r)};
-    rec.ahead = ctx.ahead && !ctx.vb.previous.empty() ? Vec3(x + ctx.motion_factor * (x - ctx.vb.previous[v])) : x;
-    ctx.s.verts.push_back(rec);
+    ctx.s.verts.push_back({x, r, ctx.axis.valid ? ctx.axis.project(x) : 0.0, v, swept ? 0.0 : reachOf(x, r)});
   }
   ctx.counters.candidate_vertices += ctx.vb.chunks.vertices(c.chunk).size();
 }
@@ -1022,10 +1018,12 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     Probe pr{vr.x, vr.x, vr.r};
     double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
     double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
-    if (ctx.ahead) {
-      pr = Probe{vr.x.cwiseMin(vr.ahead), vr.x.cwiseMax(vr.ahead), ctx.margin_sum};
+    if (ctx.ahead && !ctx.vb.previous.empty()) {
+      // Where the path ahead ends: x + f·Δx, f = motion_factor.
+      const Vec3 ahead = vr.x + ctx.motion_factor * (vr.x - ctx.vb.previous[vr.v]);
+      pr = Probe{vr.x.cwiseMin(ahead), vr.x.cwiseMax(ahead), ctx.margin_sum};
       if (sensors) {
-        const double an = ctx.axis.project(vr.ahead);
+        const double an = ctx.axis.project(ahead);
         n_lo = std::min(vr.xn, an) - ctx.margin_sum;
         n_hi = std::max(vr.xn, an) + ctx.margin_sum;
       }
