@@ -97,7 +97,7 @@ int main(int argc, char** argv) {
   app.add_option("--motion-bound", motion_bound,
                  "our pipelines' motion bound with --exact bullet or robust: radius (the default: every pair "
                  "inside Bullet's radius margins + 2|dx|) or ahead (of those, the pairs within the margins or "
-                 "that the node and the face head into over the next two steps); --exact continuous always "
+                 "that the node and the face head into during the next step); --exact continuous always "
                  "uses the swept bound")
       ->check(CLI::IsMember({"ahead", "radius"}));
   app.add_option("--truth", truth, "ground truth: none, strict, full or both (default both)")

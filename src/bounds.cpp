@@ -718,9 +718,10 @@ struct PairContext {
   /// vb == tb with the self motion term (RestFit::mean_motion): a vertex's motion term is
   /// selfMotion of its displacement against it.
   const Vec3* self_mean_motion = nullptr;
-  /// MotionBound::Ahead (two-body pairs): the probes test the paths ahead, the exact distance the
-  /// radius; with it `motion_factor` is the number of steps ahead.
+  /// MotionBound::Ahead (two-body pairs): the probes test the paths `ahead_steps` ahead, the exact
+  /// distance the radius.
   bool ahead = false;
+  double ahead_steps = 1.0;
 };
 
 /// Self-collision's exclusion rule: the triangle holds the vertex, or the two were within the
@@ -785,10 +786,10 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
         }
       }
     }
-    if (ctx.ahead && !ctx.tb.previous.empty()) {  // the box of its corners now and motion_factor steps ahead
+    if (ctx.ahead && !ctx.tb.previous.empty()) {  // the box of its corners now and ahead_steps steps ahead
       for (Index k : tri) {
         const Vec3 x = ctx.tb.positions[k];
-        const Vec3 p = x + ctx.motion_factor * (x - ctx.tb.previous[k]);
+        const Vec3 p = x + ctx.ahead_steps * (x - ctx.tb.previous[k]);
         rec.lo = rec.lo.cwiseMin(p);
         rec.hi = rec.hi.cwiseMax(p);
         if (ctx.axis.valid) {
@@ -1019,8 +1020,8 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
     double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
     if (ctx.ahead && !ctx.vb.previous.empty()) {
-      // Where the path ahead ends: x + f·Δx, f = motion_factor.
-      const Vec3 ahead = vr.x + ctx.motion_factor * (vr.x - ctx.vb.previous[vr.v]);
+      // Where the path ahead ends: x + f·Δx, f = ahead_steps.
+      const Vec3 ahead = vr.x + ctx.ahead_steps * (vr.x - ctx.vb.previous[vr.v]);
       pr = Probe{vr.x.cwiseMin(ahead), vr.x.cwiseMax(ahead), ctx.margin_sum};
       if (sensors) {
         const double an = ctx.axis.project(ahead);
@@ -1302,9 +1303,9 @@ class Collector {
 
     const auto t0 = std::chrono::steady_clock::now();
     const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab_keys, counters_, s_,
-                           -1.0, nullptr, params_.ahead};
+                           -1.0, nullptr, params_.ahead, params_.ahead_steps};
     const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba_keys, counters_, s_,
-                           -1.0, nullptr, params_.ahead};
+                           -1.0, nullptr, params_.ahead, params_.ahead_steps};
     const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
     s_.items_a.clear();
     s_.items_b.clear();

@@ -26,6 +26,8 @@ void validate(const SensorSettings& s) {
   if (s.motion_bound != MotionBound::Radius && s.motion_bound != MotionBound::Swept &&
       s.motion_bound != MotionBound::Ahead)
     bad("motion_bound", static_cast<double>(s.motion_bound), "must be MotionBound::Radius, Swept or Ahead");
+  if (!std::isfinite(s.ahead_steps) || s.ahead_steps <= 0.0)
+    bad("ahead_steps", s.ahead_steps, "must be finite and positive");
   if (s.motion_bound == MotionBound::Swept && s.flagging == Flagging::Sensors)
     throw Error(ErrorCode::InvalidSettings,
                 "motion_bound = Swept is not supported with flagging = Sensors (the thesis's flag-only mode)");

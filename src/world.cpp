@@ -503,6 +503,7 @@ const StepResult& SensorWorld::step() {
   params.swept = w.settings.motion_bound == MotionBound::Swept;
   params.motion_factor = params.swept ? 0.0 : w.settings.motion_factor;
   params.ahead = w.settings.motion_bound == MotionBound::Ahead;
+  params.ahead_steps = w.settings.ahead_steps;
   params.use_sensors = w.settings.flagging == Flagging::SensorsAndBounds;
   params.self_rest_exclusion = w.settings.self_rest_exclusion;
   params.self_radius_edges = w.settings.self_radius_edges;

@@ -33,7 +33,7 @@ enum class MotionBound {
   /// Flagging::Sensors (the thesis's mode) does not support it.
   Swept,
   /// The pairs inside Radius's radius that the motion heads into: the vertex's path ahead over
-  /// motion_factor more steps at its step's displacement (x_v → x_v + motion_factor·(x_v − x_v,prev))
+  /// `ahead_steps` more steps at its step's displacement (x_v → x_v + ahead_steps·(x_v − x_v,prev))
   /// comes within margin_A + margin_B of the triangle's path ahead (each corner likewise), or the
   /// vertex already lies within the margins. A subset of Radius's pairs: every pair within the margins,
   /// every pair the vertex and the triangle would meet in if they kept going, and none of the pairs
@@ -90,6 +90,11 @@ struct SensorSettings {
   /// Bullet's CollideVF_SS uses 2. Only used when a body has a previous-position view. ≥ 0.
   double motion_factor = 2.0;
   MotionBound motion_bound = MotionBound::Radius;
+  /// MotionBound::Ahead: how many steps ahead (> 0, finite) the paths are followed. 1 = the pairs
+  /// that would meet during the next step if nothing changed: the discrete test then sees a
+  /// crossing one step before it happens. 2 reaches as far as Bullet's radius (motion_factor = 2)
+  /// but let fast_impact run away at 2,000 vertices (docs/DECISIONS.md).
+  double ahead_steps = 1.0;
   /// [beyond] Self-collision: a body's self contact radius is the larger of 2 × margin (what two
   /// bodies with its margin would use) and this × the mean edge length of its rest shape
   /// (psc::selfContactRadius). A vertex-face test stops two sheets of one body from passing

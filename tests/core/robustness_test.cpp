@@ -452,6 +452,9 @@ TEST(BadSettings, NegativeOrZeroSizesAreNamed) {
   named("max_rounds", [](SensorSettings& s) { s.max_rounds = 0; });
   named("rounds_per_step", [](SensorSettings& s) { s.rounds_per_step = -1; });
   named("motion_factor", [](SensorSettings& s) { s.motion_factor = -2.0; });
+  named("ahead_steps", [](SensorSettings& s) { s.ahead_steps = 0.0; });
+  named("ahead_steps", [](SensorSettings& s) { s.ahead_steps = std::numeric_limits<double>::quiet_NaN(); });
+  named("motion_bound", [](SensorSettings& s) { s.motion_bound = static_cast<MotionBound>(7); });
   named("chunk_vertices", [](SensorSettings& s) { s.chunk_vertices = 0; });
   named("check_every", [](SensorSettings& s) { s.repartition.check_every = 0; });
   named("area_trigger", [](SensorSettings& s) { s.repartition.area_trigger = 0.0; });
@@ -697,7 +700,7 @@ TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
 TEST(HardConditions, AheadBoundKeepsTheMarginsAndWhatTheMotionHeadsInto) {
   // A ball flies at a sheet, fast (0.3 per step against margins of 0.02), and through it: of the
   // pairs inside Bullet's radius (margins + 2|dx|, MotionBound::Radius) the ahead bound must keep
-  // every pair within the margins now and every pair whose paths ahead (x + s·dx, s in [0, 2], for
+  // every pair within the margins now and every pair whose paths ahead (x + s·dx, s in [0, 1], for
   // the vertex and each corner) come within the margins, and nothing Radius does not keep.
   std::vector<Body> bodies(2);
   bodies[0].mesh = makePatch(6.0, 6.0, 25, 25);
@@ -760,7 +763,7 @@ TEST(HardConditions, AheadBoundKeepsTheMarginsAndWhatTheMotionHeadsInto) {
           bool meets = now < r;
           within_margins += meets ? 1 : 0;
           for (int k = 1; k <= 64 && !meets; ++k) {
-            meets = distance(2.0 * k / 64.0) < r;
+            meets = distance(settings.ahead_steps * k / 64.0) < r;
             headed += meets ? 1 : 0;
           }
           if (!meets) continue;

@@ -45,15 +45,14 @@ enum class ExactTest {
 
 struct Settings {
   /// The core's settings (μ, R_eff, rounds, flagging, partitioning, motion bound). `sensors.motion_factor`
-  /// = 2 matches the motion term of Bullet's CollideVF_SS acceptance radius (and is how many steps
-  /// MotionBound::Ahead looks ahead); less lets the candidates fall short of what Bullet would accept
-  /// for fast nodes. `sensors.motion_bound`: Radius (the default) hands Bullet's test every pair its
+  /// = 2 matches the motion term of Bullet's CollideVF_SS acceptance radius; less lets the
+  /// candidates fall short of what Bullet would accept for fast nodes. `sensors.motion_bound`: Radius (the default) hands Bullet's test every pair its
   /// radius accepts; on fast bodies Bullet's contact response, which pushes each contact's node out
-  /// to the whole radius, can feed on them (a runaway, README "Fast motion"). Ahead keeps, of those
-  /// pairs, the ones within the margins and the ones the node and the face head into over the next
-  /// motion_factor steps: no runaway on the fast scenes, fewer tests than Bullet's own path, and
-  /// still every contact within the margins; but resting bodies lose the contacts of nodes that
-  /// move away or sideways, which Radius's completeness keeps (measured in README "Fast motion").
+  /// to the whole radius, can feed on them (a runaway, README "Fast bodies with Bullet's test").
+  /// Ahead keeps, of those pairs, the ones within the margins and the ones the node and the face
+  /// head into during the next `sensors.ahead_steps` steps: no runaway on the fast scenes, fewer
+  /// tests than Bullet's own path, and still every contact within the margins; but resting bodies
+  /// lose the contacts of nodes that move away or sideways, which Radius's completeness keeps.
   psc::SensorSettings sensors;
   OptIn opt_in = OptIn::VfSsFlag;
   /// [beyond] Also collide participating body pairs that have candidates but were not dispatched
