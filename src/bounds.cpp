@@ -805,8 +805,8 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   ctx.counters.candidate_triangles += ch.triangleCount(c.chunk);
 }
 
-/// The scalar test of kept triangle j (the vector loops' tail): the vertex's ball meets its box and
-/// [n_lo, n_hi] meets its extent along the sensor axis.
+/// The scalar test of kept triangle j (the vector loops' tail): the probe (the vertex's ball, or the
+/// rounded box of its path ahead) meets its box and [n_lo, n_hi] meets its extent along the sensor axis.
 bool meetsScalar(const KeptTriangles& kept, std::size_t j, const Probe& pr, double n_lo, double n_hi) {
   const double r2 = pr.r * pr.r;
   const double dx = std::max(0.0, std::max(kept.lo_x[j] - pr.hi.x(), pr.lo.x() - kept.hi_x[j]));
