@@ -719,9 +719,8 @@ struct PairContext {
   /// selfMotion of its displacement against it.
   const Vec3* self_mean_motion = nullptr;
   /// MotionBound::Ahead (two-body pairs): the probes test the paths `ahead_steps` ahead, the exact
-  /// distance the radius.
-  bool ahead = false;
-  double ahead_steps = 1.0;
+  /// distance the radius. 0: not Ahead.
+  double ahead_steps = 0.0;
 };
 
 /// Self-collision's exclusion rule: the triangle holds the vertex, or the two were within the
@@ -764,6 +763,7 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   c.triangles_at = static_cast<int>(ctx.s.tris.size());
   const ChunkLists& ch = ctx.tb.chunks;
   const bool swept = ctx.swept && !ctx.tb.previous.empty();
+  const bool ahead = ctx.ahead_steps > 0.0 && !ctx.tb.previous.empty();
   for (std::size_t at = ch.triangle_begin[c.chunk]; at < ch.triangle_begin[c.chunk + 1]; ++at) {
     const Triangle tri = ch.triangle(c.chunk, at);
     const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], cc = ctx.tb.positions[tri[2]];
@@ -774,22 +774,13 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
       rec.nlo = std::min({pa, pb, pc});
       rec.nhi = std::max({pa, pb, pc});
     }
-    if (swept) {  // the triangle's swept volume lies in the box of its six positions
-      for (Index k : tri) {
-        const Vec3 q = ctx.tb.previous[k];
-        rec.lo = rec.lo.cwiseMin(q);
-        rec.hi = rec.hi.cwiseMax(q);
-        if (ctx.axis.valid) {
-          const double pq = ctx.axis.project(q);
-          rec.nlo = std::min(rec.nlo, pq);
-          rec.nhi = std::max(rec.nhi, pq);
-        }
-      }
-    }
-    if (ctx.ahead && !ctx.tb.previous.empty()) {  // the box of its corners now and ahead_steps steps ahead
-      for (Index k : tri) {
-        const Vec3 x = ctx.tb.positions[k];
-        const Vec3 p = x + ctx.ahead_steps * (x - ctx.tb.previous[k]);
+    // Swept: the triangle's swept volume lies in the box of its six positions (now and before).
+    // Ahead: the box of its corners now and ahead_steps steps ahead.
+    if (swept || ahead) {
+      const Vec3 now[3] = {a, b, cc};
+      for (int i = 0; i < 3; ++i) {
+        const Vec3 q = ctx.tb.previous[tri[i]];
+        const Vec3 p = swept ? q : Vec3(now[i] + ctx.ahead_steps * (now[i] - q));
         rec.lo = rec.lo.cwiseMin(p);
         rec.hi = rec.hi.cwiseMax(p);
         if (ctx.axis.valid) {
@@ -1019,7 +1010,7 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     Probe pr{vr.x, vr.x, vr.r};
     double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
     double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
-    if (ctx.ahead && !ctx.vb.previous.empty()) {
+    if (ctx.ahead_steps > 0.0 && !ctx.vb.previous.empty()) {
       // Where the path ahead ends: x + f·Δx, f = ahead_steps.
       const Vec3 ahead = vr.x + ctx.ahead_steps * (vr.x - ctx.vb.previous[vr.v]);
       pr = Probe{vr.x.cwiseMin(ahead), vr.x.cwiseMax(ahead), ctx.margin_sum};
@@ -1303,9 +1294,9 @@ class Collector {
 
     const auto t0 = std::chrono::steady_clock::now();
     const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab_keys, counters_, s_,
-                           -1.0, nullptr, params_.ahead, params_.ahead_steps};
+                           -1.0, nullptr, params_.ahead_steps};
     const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba_keys, counters_, s_,
-                           -1.0, nullptr, params_.ahead, params_.ahead_steps};
+                           -1.0, nullptr, params_.ahead_steps};
     const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
     s_.items_a.clear();
     s_.items_b.clear();

@@ -30,8 +30,8 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit = false);
 struct CullParams {
   double motion_factor = 2.0;  ///< MotionBound::Radius; 0 with `swept`
   bool swept = false;          ///< MotionBound::Swept
-  bool ahead = false;          ///< MotionBound::Ahead: two-body probes against the paths ahead
-  double ahead_steps = 1.0;    ///< SensorSettings::ahead_steps
+  double ahead_steps = 0.0;    ///< MotionBound::Ahead: SensorSettings::ahead_steps (two-body probes
+                               ///< against the paths ahead); 0 = not Ahead
   bool use_sensors = true;     ///< false: Flagging::Bounds (the ablation)
   double self_rest_exclusion = 2.0;  ///< SensorSettings::self_rest_exclusion
   double self_radius_edges = 1.0;    ///< SensorSettings::self_radius_edges

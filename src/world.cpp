@@ -502,8 +502,7 @@ const StepResult& SensorWorld::step() {
   detail::CullParams params;
   params.swept = w.settings.motion_bound == MotionBound::Swept;
   params.motion_factor = params.swept ? 0.0 : w.settings.motion_factor;
-  params.ahead = w.settings.motion_bound == MotionBound::Ahead;
-  params.ahead_steps = w.settings.ahead_steps;
+  params.ahead_steps = w.settings.motion_bound == MotionBound::Ahead ? w.settings.ahead_steps : 0.0;
   params.use_sensors = w.settings.flagging == Flagging::SensorsAndBounds;
   params.self_rest_exclusion = w.settings.self_rest_exclusion;
   params.self_radius_edges = w.settings.self_radius_edges;

@@ -625,11 +625,9 @@ TEST(HardConditions, FastBodyCrossingSeveralRegionsPerStepLosesNoContact) {
   EXPECT_GT(contacts, 100u);
 }
 
-// MotionBound::Swept: every (vertex, triangle) pair that comes within the margins at some time of
-// the step (both moving linearly) is a candidate. Reference: the distance at 65 times of the step
-// (a pair found at a sampled time certainly meets the margins), by brute force. Both bodies move,
-// every vertex with its own random jitter, and the ball crosses several regions per step.
-TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
+/// The motion-bound tests' bodies: a 6 × 6 sheet of 625 vertices (64 particles) and a ball of
+/// radius 0.4, margins 0.02.
+std::vector<Body> sheetAndBall() {
   std::vector<Body> bodies(2);
   bodies[0].mesh = makePatch(6.0, 6.0, 25, 25);
   bodies[0].particles = 64;
@@ -637,6 +635,15 @@ TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
   bodies[1].mesh = makeIcosphere(0.4, 2);
   bodies[1].name = "ball";
   for (Body& b : bodies) b.margin = 0.02;
+  return bodies;
+}
+
+// MotionBound::Swept: every (vertex, triangle) pair that comes within the margins at some time of
+// the step (both moving linearly) is a candidate. Reference: the distance at 65 times of the step
+// (a pair found at a sampled time certainly meets the margins), by brute force. Both bodies move,
+// every vertex with its own random jitter, and the ball crosses several regions per step.
+TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
+  std::vector<Body> bodies = sheetAndBall();
   const TriMesh sheet_rest = bodies[0].mesh, ball_rest = bodies[1].mesh;
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> jitter(-0.03, 0.03);
@@ -702,13 +709,7 @@ TEST(HardConditions, AheadBoundKeepsTheMarginsAndWhatTheMotionHeadsInto) {
   // pairs inside Bullet's radius (margins + 2|dx|, MotionBound::Radius) the ahead bound must keep
   // every pair within the margins now and every pair whose paths ahead (x + s·dx, s in [0, 1], for
   // the vertex and each corner) come within the margins, and nothing Radius does not keep.
-  std::vector<Body> bodies(2);
-  bodies[0].mesh = makePatch(6.0, 6.0, 25, 25);
-  bodies[0].particles = 64;
-  bodies[0].name = "sheet";
-  bodies[1].mesh = makeIcosphere(0.4, 2);
-  bodies[1].name = "ball";
-  for (Body& b : bodies) b.margin = 0.02;
+  std::vector<Body> bodies = sheetAndBall();
   const TriMesh sheet_rest = bodies[0].mesh, ball_rest = bodies[1].mesh;
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> jitter(-0.02, 0.02);
