@@ -582,6 +582,41 @@ double pointTriangleDistance2(const Vec3& p, const Vec3& a, const Vec3& b, const
   return (p - (a + v * ab + w * ac)).squaredNorm();
 }
 
+/// The candidate filter's squared distance from p to the triangle (a, b, c), without a branch:
+/// the least of the distances to the three edges and, where p projects inside the triangle, the
+/// distance to its plane. The same value as pointTriangleDistance2 up to rounding; its AVX2 twin
+/// (distances4Avx2) makes the same operations in the same order, so the two give the same bits and
+/// the same candidates. Degenerate edges and triangles give the distance to their points, never NaN.
+struct FilterDistance {
+  static double dot(double ax, double ay, double az, double bx, double by, double bz) {
+    return (ax * bx + ay * by) + az * bz;
+  }
+  /// Squared distance from the point at q (relative to the edge's start) to the edge e.
+  static double edge(double ex, double ey, double ez, double qx, double qy, double qz, double ee, double qe) {
+    const double t = ee > 0.0 ? std::min(std::max(qe / ee, 0.0), 1.0) : 0.0;
+    const double x = qx - t * ex, y = qy - t * ey, z = qz - t * ez;
+    return dot(x, y, z, x, y, z);
+  }
+  static double of(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+    const double abx = b.x() - a.x(), aby = b.y() - a.y(), abz = b.z() - a.z();
+    const double acx = c.x() - a.x(), acy = c.y() - a.y(), acz = c.z() - a.z();
+    const double apx = p.x() - a.x(), apy = p.y() - a.y(), apz = p.z() - a.z();
+    const double bcx = c.x() - b.x(), bcy = c.y() - b.y(), bcz = c.z() - b.z();
+    const double bpx = p.x() - b.x(), bpy = p.y() - b.y(), bpz = p.z() - b.z();
+    const double d00 = dot(abx, aby, abz, abx, aby, abz), d11 = dot(acx, acy, acz, acx, acy, acz);
+    const double d01 = dot(abx, aby, abz, acx, acy, acz);
+    const double d20 = dot(apx, apy, apz, abx, aby, abz), d21 = dot(apx, apy, apz, acx, acy, acz);
+    const double e22 = dot(bcx, bcy, bcz, bcx, bcy, bcz), e2p = dot(bpx, bpy, bpz, bcx, bcy, bcz);
+    const double s = std::min(std::min(edge(abx, aby, abz, apx, apy, apz, d00, d20), edge(acx, acy, acz, apx, apy, apz, d11, d21)),
+                              edge(bcx, bcy, bcz, bpx, bpy, bpz, e22, e2p));
+    const double denom = d00 * d11 - d01 * d01, vn = d11 * d20 - d01 * d21, wn = d00 * d21 - d01 * d20;
+    const double nx = aby * acz - abz * acy, ny = abz * acx - abx * acz, nz = abx * acy - aby * acx;
+    const double nn = dot(nx, ny, nz, nx, ny, nz), np = dot(nx, ny, nz, apx, apy, apz);
+    const bool inside = (denom > 0.0) & (nn > 0.0) & (vn >= 0.0) & (wn >= 0.0) & (vn + wn <= denom);
+    return inside ? std::min(np * np / nn, s) : s;
+  }
+};
+
 /// The sensor axis of one region pair: n from A's particle to B's, and each chunk's extent along
 /// n (its box's support, grown by its reach).
 struct Axis {
@@ -695,6 +730,9 @@ struct Scratch {
   KeptTriangles kept;
   std::vector<Index> hits;
   std::vector<Index> picked;  ///< chunkCandidates: the vertices of a chunk pair worth probing
+  /// chunkCandidates with MotionBound::Radius: the pairs whose boxes meet, (vertex record,
+  /// triangle record), whose exact distance is then measured four at a time.
+  std::vector<std::pair<Index, Index>> pending;
   /// Forgets the gathered vertex and triangle records (ChunkRef's offsets must be reset with them).
   void clearRecords() {
     verts.clear();
@@ -939,11 +977,111 @@ std::size_t collectMeets(const KeptTriangles& kept, const Probe& pr, double n_lo
 }
 #endif
 
+#if defined(PSC_HAVE_AVX2_PATH)
+/// FilterDistance::of for four pairs at once (AVX2, chosen at run time): the same operations in the
+/// same order, without fused multiply-adds, so the same bits.
+struct FilterDistance4 {
+  using V = __m256d;
+  [[gnu::target("avx2")]] static V dot(V ax, V ay, V az, V bx, V by, V bz) {
+    return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ax, bx), _mm256_mul_pd(ay, by)), _mm256_mul_pd(az, bz));
+  }
+  [[gnu::target("avx2")]] static V edge(V ex, V ey, V ez, V qx, V qy, V qz, V ee, V qe) {
+    const V zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0);
+    // std::max(q, 0.0) and std::min(·, 1.0) pick the same values as maxpd(q, 0) and minpd(·, 1) for
+    // every q that is not NaN (up to the sign of a zero); a NaN or infinite q (ee = 0) is blended away.
+    const V clamped = _mm256_min_pd(_mm256_max_pd(_mm256_div_pd(qe, ee), zero), one);
+    const V t = _mm256_blendv_pd(zero, clamped, _mm256_cmp_pd(ee, zero, _CMP_GT_OQ));
+    const V x = _mm256_sub_pd(qx, _mm256_mul_pd(t, ex)), y = _mm256_sub_pd(qy, _mm256_mul_pd(t, ey));
+    const V z = _mm256_sub_pd(qz, _mm256_mul_pd(t, ez));
+    return dot(x, y, z, x, y, z);
+  }
+  [[gnu::target("avx2")]] static V lane(const Vec3* const v[4], int axis) {
+    return _mm256_setr_pd((*v[0])[axis], (*v[1])[axis], (*v[2])[axis], (*v[3])[axis]);
+  }
+  /// Squared distances of points p[i] to triangles (a[i], b[i], c[i]), i < 4, into out.
+  [[gnu::target("avx2")]] static void of(const Vec3* const p[4], const Vec3* const a[4], const Vec3* const b[4],
+                                         const Vec3* const c[4], double out[4]) {
+    const V px = lane(p, 0), py = lane(p, 1), pz = lane(p, 2);
+    const V ax = lane(a, 0), ay = lane(a, 1), az = lane(a, 2);
+    const V bx = lane(b, 0), by = lane(b, 1), bz = lane(b, 2);
+    const V cx = lane(c, 0), cy = lane(c, 1), cz = lane(c, 2);
+    const V abx = _mm256_sub_pd(bx, ax), aby = _mm256_sub_pd(by, ay), abz = _mm256_sub_pd(bz, az);
+    const V acx = _mm256_sub_pd(cx, ax), acy = _mm256_sub_pd(cy, ay), acz = _mm256_sub_pd(cz, az);
+    const V apx = _mm256_sub_pd(px, ax), apy = _mm256_sub_pd(py, ay), apz = _mm256_sub_pd(pz, az);
+    const V bcx = _mm256_sub_pd(cx, bx), bcy = _mm256_sub_pd(cy, by), bcz = _mm256_sub_pd(cz, bz);
+    const V bpx = _mm256_sub_pd(px, bx), bpy = _mm256_sub_pd(py, by), bpz = _mm256_sub_pd(pz, bz);
+    const V d00 = dot(abx, aby, abz, abx, aby, abz), d11 = dot(acx, acy, acz, acx, acy, acz);
+    const V d01 = dot(abx, aby, abz, acx, acy, acz);
+    const V d20 = dot(apx, apy, apz, abx, aby, abz), d21 = dot(apx, apy, apz, acx, acy, acz);
+    const V e22 = dot(bcx, bcy, bcz, bcx, bcy, bcz), e2p = dot(bpx, bpy, bpz, bcx, bcy, bcz);
+    const V s = _mm256_min_pd(_mm256_min_pd(edge(abx, aby, abz, apx, apy, apz, d00, d20),
+                                            edge(acx, acy, acz, apx, apy, apz, d11, d21)),
+                              edge(bcx, bcy, bcz, bpx, bpy, bpz, e22, e2p));
+    const V denom = _mm256_sub_pd(_mm256_mul_pd(d00, d11), _mm256_mul_pd(d01, d01));
+    const V vn = _mm256_sub_pd(_mm256_mul_pd(d11, d20), _mm256_mul_pd(d01, d21));
+    const V wn = _mm256_sub_pd(_mm256_mul_pd(d00, d21), _mm256_mul_pd(d01, d20));
+    const V nx = _mm256_sub_pd(_mm256_mul_pd(aby, acz), _mm256_mul_pd(abz, acy));
+    const V ny = _mm256_sub_pd(_mm256_mul_pd(abz, acx), _mm256_mul_pd(abx, acz));
+    const V nz = _mm256_sub_pd(_mm256_mul_pd(abx, acy), _mm256_mul_pd(aby, acx));
+    const V nn = dot(nx, ny, nz, nx, ny, nz), np = dot(nx, ny, nz, apx, apy, apz);
+    const V zero = _mm256_setzero_pd();
+    const V inside = _mm256_and_pd(
+        _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(denom, zero, _CMP_GT_OQ), _mm256_cmp_pd(nn, zero, _CMP_GT_OQ)),
+                      _mm256_and_pd(_mm256_cmp_pd(vn, zero, _CMP_GE_OQ), _mm256_cmp_pd(wn, zero, _CMP_GE_OQ))),
+        _mm256_cmp_pd(_mm256_add_pd(vn, wn), denom, _CMP_LE_OQ));
+    // std::min(plane, s) is s < plane ? s : plane.
+    const V plane = _mm256_div_pd(_mm256_mul_pd(np, np), nn);
+    const V with_plane = _mm256_blendv_pd(plane, s, _mm256_cmp_pd(s, plane, _CMP_LT_OQ));
+    _mm256_storeu_pd(out, _mm256_blendv_pd(s, with_plane, inside));
+    _mm256_zeroupper();  // as in collectMeetsAvx2: the SSE code after it runs with a clean state
+  }
+};
+#endif
+
 std::atomic<bool> g_avx2_allowed{true};  ///< allowAvx2Probes
 
 #if defined(PSC_HAVE_AVX2_PATH)
 bool useAvx2Probes() { return g_avx2_allowed.load(std::memory_order_relaxed) && avx2ProbesAvailable(); }
 #endif
+
+/// MotionBound::Radius: of the pending pairs (in order), those whose vertex lies within its reach of
+/// the triangle by the exact distance become candidates; a pair that is not within the vertex's
+/// radius now is no candidate. Four pairs at a time with AVX2 where the processor has it.
+void keepWithinReach(const PairContext& ctx, const VertexRec* recs) {
+  Scratch& s = ctx.s;
+  const std::size_t n = s.pending.size();
+  std::size_t i = 0;
+  const auto decide = [&](std::size_t at, double d2) {
+    const VertexRec& vr = recs[s.pending[at].first];
+    if (d2 < vr.reach2)
+      ctx.out.push_back((std::uint64_t{vr.v} << 32) | s.corners[s.pending[at].second].t);
+    else
+      ++ctx.counters.candidates_beyond_reach;
+  };
+#if defined(PSC_HAVE_AVX2_PATH)
+  if (useAvx2Probes()) {
+    // Four pairs a time; the tail one at a time (the same bits either way).
+    for (; i + 4 <= n; i += 4) {
+      const Vec3 *p[4], *a[4], *b[4], *c[4];
+      for (int l = 0; l < 4; ++l) {
+        const TriangleCorners& tc = s.corners[s.pending[i + l].second];
+        p[l] = &recs[s.pending[i + l].first].x;
+        a[l] = &tc.a;
+        b[l] = &tc.b;
+        c[l] = &tc.c;
+      }
+      alignas(32) double d2[4];
+      FilterDistance4::of(p, a, b, c, d2);
+      for (int l = 0; l < 4; ++l) decide(i + l, d2[l]);
+    }
+  }
+#endif
+  for (; i < n; ++i) {
+    const TriangleCorners& tc = s.corners[s.pending[i].second];
+    decide(i, FilterDistance::of(recs[s.pending[i].first].x, tc.a, tc.b, tc.c));
+  }
+  s.pending.clear();
+}
 
 // Vertices of chunk cv (of ctx.vb) against the triangles owned by chunk ct (of ctx.tb).
 void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
@@ -1039,17 +1177,16 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
         ++ctx.counters.self_excluded_pairs;
         continue;
       }
-      // With the radius bound the exact distance decides: a pair that is not within the vertex's
-      // radius now is no candidate (the swept bound keeps what the boxes keep: its pairs may meet
-      // during the step).
-      if (!ctx.swept && !(pointTriangleDistance2(vr.x, tc.a, tc.b, tc.c) < vr.reach2)) {
-        ++ctx.counters.candidates_beyond_reach;
-        continue;
-      }
-      ctx.out.push_back((std::uint64_t{vr.v} << 32) | tc.t);
+      // With the radius bound the exact distance decides (below, for all of the chunk pair's
+      // pairs at once); the swept bound keeps what the boxes keep: its pairs may meet during the step.
+      if (ctx.swept)
+        ctx.out.push_back((std::uint64_t{vr.v} << 32) | tc.t);
+      else
+        s.pending.emplace_back(s.picked[pick], k);
     }
   }
   ctx.counters.candidate_probes += probes;
+  if (!s.pending.empty()) keepWithinReach(ctx, recs);
 }
 
 /// [beyond] The rest-shape bound of self-collision. A rigid motion T keeps distances, so for a
@@ -1426,6 +1563,21 @@ bool avx2ProbesAvailable() {
 }
 
 void allowAvx2Probes(bool allowed) { g_avx2_allowed.store(allowed, std::memory_order_relaxed); }
+
+double filterDistance2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  return FilterDistance::of(p, a, b, c);
+}
+
+void filterDistance2x4(const Vec3* const p[4], const Vec3* const a[4], const Vec3* const b[4], const Vec3* const c[4],
+                       double out[4]) {
+#if defined(PSC_HAVE_AVX2_PATH)
+  if (useAvx2Probes()) {
+    FilterDistance4::of(p, a, b, c, out);
+    return;
+  }
+#endif
+  for (int l = 0; l < 4; ++l) out[l] = FilterDistance::of(*p[l], *a[l], *b[l], *c[l]);
+}
 
 void cullAndCollect(const std::vector<Body*>& bodies, const BodyPairs& pairs, const CullParams& params,
                     std::vector<FlaggedPair>& flagged, std::vector<CandidatePair>& candidates, StepStats& counters) {

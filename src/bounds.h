@@ -65,4 +65,13 @@ bool avx2ProbesAvailable();
 /// Allows (the default) or forbids the AVX2 path, process-wide: for the test that the two agree.
 void allowAvx2Probes(bool allowed);
 
+/// The candidate stage's exact distance (MotionBound::Radius): the squared distance from p to the
+/// triangle (a, b, c), branch-free (the least of the distances to the edges and, where p projects
+/// inside, to the plane); never NaN, degenerate triangles included.
+double filterDistance2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+/// The same for four pairs: with the AVX2 path where it is available and allowed, otherwise one at
+/// a time. The two give the same bits.
+void filterDistance2x4(const Vec3* const p[4], const Vec3* const a[4], const Vec3* const b[4], const Vec3* const c[4],
+                       double out[4]);
+
 }  // namespace psc::detail

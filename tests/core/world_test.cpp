@@ -14,11 +14,14 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <iostream>
 #include <limits>
+#include <random>
 #include <set>
 
 namespace psc {
@@ -602,6 +605,82 @@ TEST(Probes, Avx2AndSse2GiveTheSameCandidates) {
     EXPECT_GT(wide.second, wide.first.size());
     EXPECT_EQ(wide.second, narrow.second);
     EXPECT_TRUE(wide.first == narrow.first);
+  }
+}
+
+// The candidate filter's branch-free distance on seeded random pairs: general triangles, slivers,
+// collinear and coincident corners; points anywhere, on the plane inside, on an edge's line, at a
+// corner and just above the plane. On well-shaped triangles it is the reference point-triangle
+// distance (testkit, by Voronoi regions) up to rounding. On every triangle it never exceeds the
+// distance to the nearest edge (an upper bound of the true distance), and a point on or just above
+// a sliver is found that close (the reference's Voronoi regions lose it there: 8e-7 for a point
+// 1e-10 above the sliver). Its four-lane form gives the same bits with and without AVX2.
+TEST(Probes, FilterDistanceMatchesTheReferenceAndTheLanesAgree) {
+  std::mt19937_64 rng(20261125);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const auto point = [&] { return Vec3(u(rng), u(rng), u(rng)); };
+  const auto edge2 = [](const Vec3& p, const Vec3& x, const Vec3& y) {
+    const Vec3 d = y - x;
+    const double l2 = d.squaredNorm();
+    const double t = l2 > 0.0 ? std::clamp((p - x).dot(d) / l2, 0.0, 1.0) : 0.0;
+    return (p - (x + t * d)).squaredNorm();
+  };
+  std::vector<std::array<Vec3, 4>> cases;  // p, a, b, c
+  std::size_t well_shaped = 0;
+  for (int i = 0; i < 4000; ++i) {
+    Vec3 a = point(), b = point(), c = point();
+    const int shape = i % 8, place = i % 5;
+    switch (shape) {
+      case 1: c = a + 0.37 * (b - a); break;                 // collinear
+      case 2: b = a; break;                                   // two corners coincide
+      case 3: b = a; c = a; break;                            // a point
+      case 4: c = 0.5 * (a + b) + 1e-7 * point(); break;      // a sliver
+      default: break;
+    }
+    const Vec3 n = (b - a).cross(c - a);
+    Vec3 p = point();
+    switch (place) {
+      case 1: p = a + 0.3 * (b - a) + 0.2 * (c - a); break;                 // on the plane, inside
+      case 2: p = a + 1.7 * (b - a); break;                                 // on an edge's line, beyond
+      case 3: p = b; break;                                                 // at a corner
+      case 4: p = a + 0.3 * (b - a) + 0.2 * (c - a) + 1e-3 * n; break;     // just above, inside
+      default: break;
+    }
+    cases.push_back({p, a, b, c});
+    const double d = detail::filterDistance2(p, a, b, c);
+    const double scale = 1e-12 * (1.0 + (p - a).squaredNorm());
+    ASSERT_TRUE(std::isfinite(d) && d >= 0.0) << "case " << i;
+    EXPECT_LE(d, std::min({edge2(p, a, b), edge2(p, b, c), edge2(p, c, a)}) + scale) << "case " << i;
+    // Up to the rounding of p and of the plane's normal (a sliver's is known to about 1e-9).
+    if (place == 1 || place == 4) EXPECT_LE(d, 1e-6 * n.squaredNorm() * (1.0 + 1e-6) + 1e-16) << "case " << i;
+    const double sin2 = n.squaredNorm() / std::max((b - a).squaredNorm() * (c - a).squaredNorm(), 1e-300);
+    if (sin2 > 1e-6 && n.squaredNorm() / std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()}) > 1e-8) {
+      ++well_shaped;
+      EXPECT_NEAR(d, testkit::pointTriangleDistanceSquared(p, a, b, c), scale) << "case " << i;
+    }
+  }
+  EXPECT_GT(well_shaped, 1500u);
+  std::vector<double> one(cases.size());
+  for (std::size_t i = 0; i < cases.size(); ++i)
+    one[i] = detail::filterDistance2(cases[i][0], cases[i][1], cases[i][2], cases[i][3]);
+  for (bool avx2 : {true, false}) {
+    if (avx2 && !detail::avx2ProbesAvailable()) continue;
+    detail::allowAvx2Probes(avx2);
+    for (std::size_t i = 0; i + 4 <= cases.size(); i += 4) {
+      const Vec3 *p[4], *a[4], *b[4], *c[4];
+      for (int l = 0; l < 4; ++l) {
+        p[l] = &cases[i + l][0];
+        a[l] = &cases[i + l][1];
+        b[l] = &cases[i + l][2];
+        c[l] = &cases[i + l][3];
+      }
+      double out[4];
+      detail::filterDistance2x4(p, a, b, c, out);
+      for (int l = 0; l < 4; ++l)
+        ASSERT_EQ(std::memcmp(&out[l], &one[i + l], sizeof(double)), 0)
+            << "case " << i + l << (avx2 ? " (AVX2)" : " (portable)") << ": " << out[l] << " vs " << one[i + l];
+    }
+    detail::allowAvx2Probes(true);
   }
 }
 
