@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
   std::size_t steps = 0, warmup = 0, frame_every = 1;
   std::string pipeline = "both", flagging = "default", truth = "both", exact = "bullet", motion_bound = "radius", json, csv, frames, plot_dir;
   std::vector<std::string> sweep, bullet_clusters;
-  bool list = false, no_penetration = false, self_collision = false, refit_in_step = false;
+  bool list = false, no_penetration = false, self_collision = false, refit_in_step = false, runaway_fallback = false;
   app.add_option("--scene", scenes, "scene name or number, repeatable, or 'all' (default: all; see --list-scenes)");
   app.add_option("--resolution", params.resolution, "vertices per body (default 1000)")->check(CLI::Range(14, 10000000));
   app.add_option("--bodies", params.bodies, "body count, for scenes that take one (default: the scene's)")
@@ -130,6 +130,9 @@ int main(int argc, char** argv) {
   app.add_flag("--refit-in-step", refit_in_step,
                "our pipelines refit every body in the sensor step (cold) instead of right after its "
                "predictMotion (psc::bullet::SoftBodySolver, the default here)");
+  app.add_flag("--runaway-fallback", runaway_fallback,
+               "our pipelines with --exact bullet or robust and the radius bound: a body pair that runs away goes "
+               "on the ahead bound until its bodies part (psc::bullet::Settings::runaway_fallback)");
   app.add_flag("--no-penetration", no_penetration, "skip the inside tests after each step");
   app.add_flag("--list-scenes", list, "list the scenes and exit");
   try {
@@ -183,6 +186,7 @@ int main(int argc, char** argv) {
     options.run.motion_bound = motion_bound;
     options.run.self_collision = self_collision;
     options.run.refit_after_predict = !refit_in_step;
+    options.run.runaway_fallback = runaway_fallback;
     options.run.frames_dir = frames;
     options.run.frame_every = frame_every;
     options.run.warmup = warmup;

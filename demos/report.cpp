@@ -113,6 +113,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["pipeline"] = runName(r);
   j["exact"] = r.exact;
   if (!r.motion_bound.empty()) j["motion_bound"] = r.motion_bound;
+  if (r.pipeline != Pipeline::Bullet) j["runaway_fallback"] = r.runaway_fallback;
   if (r.has_strict) {
     j["recall_strict"] = r.recall_strict;
     j["recall_strict_worst_step"] = r.recall_strict_worst_step;

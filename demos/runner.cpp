@@ -227,6 +227,7 @@ RunResult describeRun(const Scene& scene, Pipeline pipeline, const RunOptions& o
   if (pipeline == Pipeline::Bounds) r.flagging = "bounds";
   r.exact = pipeline == Pipeline::Bullet ? "bullet" : opt.exact;
   r.motion_bound = pipeline == Pipeline::Bullet ? "" : opt.exact == "continuous" ? "swept" : opt.motion_bound;
+  r.runaway_fallback = pipeline != Pipeline::Bullet && opt.runaway_fallback;
   if (pipeline == Pipeline::Bullet && opt.bullet_clusters > 0) {
     r.bullet_clusters = opt.bullet_clusters;
     r.cluster_self_direct = opt.cluster_self_direct;
@@ -345,7 +346,7 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
     : scene_(scene), pipeline_(pipeline), opt_(opt), world_(scene, worldOptions(pipeline, opt)) {
   if (pipeline != Pipeline::Bullet)
     sensors_ = std::make_unique<SensorPipeline>(world_, coreFlagging(pipeline, opt.flagging), opt.exact, opt.motion_bound,
-                                                opt.self_collision, opt.refit_after_predict);
+                                                opt.self_collision, opt.refit_after_predict, opt.runaway_fallback);
   truth_settings_.strict = strict;
   truth_settings_.full = full;
   world_.world().before_collision = [this] {

@@ -79,6 +79,8 @@ struct RunOptions {
   /// Our pipelines refit each body right after its predictMotion, nodes warm (SensorPipeline);
   /// false (--refit-in-step): in the sensor step, as a plugin without the solver hook does.
   bool refit_after_predict = true;
+  /// psc::bullet::Settings::runaway_fallback for our pipelines (--runaway-fallback).
+  bool runaway_fallback = false;
   /// > 0: a Bullet cluster run (only with Pipeline::Bullet): generateClusters(bullet_clusters) on
   /// every body; CL_SS | CL_SELF as Bullet documents it, or with cluster_self_direct CL_SS and the
   /// cluster self-collision called directly (TimedSoftBodySolver::setCallClusterSelf).
@@ -96,6 +98,7 @@ struct RunResult {
   std::string flagging;           ///< ours: "default", "thesis" or "bounds"; empty for Bullet's
   std::string exact = "bullet";   ///< exact test of the run (Bullet's own pipeline: always bullet)
   std::string motion_bound;       ///< ours: "ahead", "radius" or "swept" (continuous); empty for Bullet's
+  bool runaway_fallback = false;  ///< ours: RunOptions::runaway_fallback
   bool self_collision = false;    ///< the pipeline itself: ours with RunOptions::self_collision, Bullet's cluster runs
   int bullet_clusters = 0;        ///< RunOptions::bullet_clusters (0: not a cluster run)
   bool cluster_self_direct = false;

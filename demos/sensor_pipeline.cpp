@@ -24,11 +24,13 @@ bool SensorPipeline::available() { return true; }
 int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
 
 SensorPipeline::SensorPipeline(SceneWorld& world, psc::Flagging flagging, const std::string& exact,
-                               const std::string& motion_bound, bool self_collision, bool refit_after_predict) {
+                               const std::string& motion_bound, bool self_collision, bool refit_after_predict,
+                               bool runaway_fallback) {
   psc::bullet::Settings settings;
   settings.opt_in = psc::bullet::OptIn::Explicit;
   settings.sensors.flagging = flagging;
   settings.self_collision = self_collision;
+  settings.runaway_fallback = runaway_fallback;
   settings.exact = psc::bullet::exactTestFromString(exact);
   if (motion_bound == "radius") settings.sensors.motion_bound = psc::MotionBound::Radius;
   else if (motion_bound == "ahead") settings.sensors.motion_bound = psc::MotionBound::Ahead;
@@ -125,7 +127,7 @@ SensorView SensorPipeline::view() const {
 struct SensorPipeline::Impl {};
 bool SensorPipeline::available() { return false; }
 int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
-SensorPipeline::SensorPipeline(SceneWorld&, psc::Flagging, const std::string&, const std::string&, bool, bool) {
+SensorPipeline::SensorPipeline(SceneWorld&, psc::Flagging, const std::string&, const std::string&, bool, bool, bool) {
   throw Error(ErrorCode::InvalidArgument, "this psc_demo was built without psc::bullet: use --pipeline bullet");
 }
 SensorPipeline::~SensorPipeline() = default;

@@ -42,10 +42,11 @@ class SensorPipeline {
   /// the world's solver calls Plugin::afterPredictMotion after each body's predictMotion (what
   /// psc::bullet::SoftBodySolver does), so the sensors refit each body while its nodes are warm;
   /// false: every body is refit in the sensor step, at the first soft-soft pair.
+  /// `runaway_fallback`: Settings::runaway_fallback.
   explicit SensorPipeline(SceneWorld& world, psc::Flagging flagging = psc::Flagging::SensorsAndBounds,
                           const std::string& exact = "bullet", const std::string& motion_bound = "radius",
                           bool self_collision = false,
-                          bool refit_after_predict = true);
+                          bool refit_after_predict = true, bool runaway_fallback = false);
   ~SensorPipeline();
 
   /// Adds the plugin's figures of the step that just ended to `record` (times and counts stay 0

@@ -1256,6 +1256,10 @@ class Collector {
 
   void bodyPair(const Body& A, const Body& B) {
     ++counters_.body_pairs;
+    pair_ahead_steps_ = params_.ahead_steps;
+    if (pair_ahead_steps_ == 0.0 && !params_.swept && params_.ahead_pairs != nullptr &&
+        std::binary_search(params_.ahead_pairs->begin(), params_.ahead_pairs->end(), std::make_pair(A.id, B.id)))
+      pair_ahead_steps_ = params_.pair_ahead_steps;
     const Grown boxA = grown(A.body_box, A.margin, params_.motion_factor);
     const Grown boxB = grown(B.body_box, B.margin, params_.motion_factor);
     // Sweep along the longest axis of the two bodies' common box.
@@ -1431,9 +1435,9 @@ class Collector {
 
     const auto t0 = std::chrono::steady_clock::now();
     const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab_keys, counters_, s_,
-                           -1.0, nullptr, params_.ahead_steps};
+                           -1.0, nullptr, pair_ahead_steps_};
     const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba_keys, counters_, s_,
-                           -1.0, nullptr, params_.ahead_steps};
+                           -1.0, nullptr, pair_ahead_steps_};
     const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
     s_.items_a.clear();
     s_.items_b.clear();
@@ -1509,6 +1513,7 @@ class Collector {
   Scratch s_;
   std::vector<std::pair<Index, Index>> region_pairs_, chunk_pairs_;
   std::vector<Grown> self_boxes_;
+  double pair_ahead_steps_ = 0.0;  ///< the body pair's PairContext::ahead_steps
 };
 
 }  // namespace

@@ -33,6 +33,10 @@ struct CullParams {
   double ahead_steps = 0.0;    ///< MotionBound::Ahead: SensorSettings::ahead_steps (two-body probes
                                ///< against the paths ahead); 0 = not Ahead
   bool use_sensors = true;     ///< false: Flagging::Bounds (the ablation)
+  /// MotionBound::Radius: body pairs (ids, first < second, sorted) on the Ahead bound with
+  /// `pair_ahead_steps` (SensorWorld::setPairAhead).
+  const std::vector<std::pair<BodyId, BodyId>>* ahead_pairs = nullptr;
+  double pair_ahead_steps = 1.0;
   double self_rest_exclusion = 2.0;  ///< SensorSettings::self_rest_exclusion
   double self_radius_edges = 1.0;    ///< SensorSettings::self_radius_edges
   bool self_rest_bound = true;       ///< SensorSettings::self_rest_bound

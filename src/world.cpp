@@ -55,6 +55,8 @@ struct SensorWorld::Impl {
   std::uint64_t partitions_made = 0;
   PointHashGrid grid;
   detail::ThesisScratch thesis;
+  /// SensorWorld::setPairAhead: body pairs (first < second), sorted.
+  std::vector<std::pair<BodyId, BodyId>> ahead_pairs;
 
   Body& get(BodyId id) {
     auto it = bodies.find(id);
@@ -386,6 +388,28 @@ void SensorWorld::removeBody(BodyId id) {
   impl_->get(id);
   impl_->bodies.erase(id);
   impl_->membership_changed = true;
+  auto& pairs = impl_->ahead_pairs;
+  pairs.erase(std::remove_if(pairs.begin(), pairs.end(), [id](const auto& p) { return p.first == id || p.second == id; }),
+              pairs.end());
+}
+
+void SensorWorld::setPairAhead(BodyId a, BodyId b, bool ahead) {
+  impl_->get(a);
+  impl_->get(b);
+  if (a == b) throw Error(ErrorCode::InvalidArgument, "setPairAhead: a body pair needs two bodies, got " + std::to_string(a) + " twice");
+  const std::pair<BodyId, BodyId> key(std::min(a, b), std::max(a, b));
+  auto& pairs = impl_->ahead_pairs;
+  const auto at = std::lower_bound(pairs.begin(), pairs.end(), key);
+  const bool has = at != pairs.end() && *at == key;
+  if (ahead && !has) pairs.insert(at, key);
+  if (!ahead && has) pairs.erase(at);
+}
+
+bool SensorWorld::pairAhead(BodyId a, BodyId b) const {
+  impl_->get(a);
+  impl_->get(b);
+  const std::pair<BodyId, BodyId> key(std::min(a, b), std::max(a, b));
+  return std::binary_search(impl_->ahead_pairs.begin(), impl_->ahead_pairs.end(), key);
 }
 
 bool SensorWorld::hasBody(BodyId id) const { return impl_->bodies.count(id) != 0; }
@@ -513,6 +537,18 @@ const StepResult& SensorWorld::step() {
   const detail::BodyPairs body_pairs = w.settings.flagging == Flagging::Sensors
                                            ? detail::BodyPairs{}
                                            : detail::overlappingBodies(ordered, params);
+  if (!w.ahead_pairs.empty()) {
+    // A pair on the Ahead bound goes back to the radius once its bodies' grown boxes part.
+    std::vector<std::pair<BodyId, BodyId>> still;
+    for (const auto& [i, j] : body_pairs) {
+      const std::pair<BodyId, BodyId> key(ordered[i]->id, ordered[j]->id);  // ordered by id
+      if (std::binary_search(w.ahead_pairs.begin(), w.ahead_pairs.end(), key)) still.push_back(key);
+    }
+    std::sort(still.begin(), still.end());
+    w.ahead_pairs.swap(still);
+    params.ahead_pairs = &w.ahead_pairs;
+    params.pair_ahead_steps = w.settings.ahead_steps;
+  }
   const std::vector<std::vector<char>> near = params.use_sensors
                                                   ? detail::regionsNearOtherBodies(ordered, body_pairs, params)
                                                   : std::vector<std::vector<char>>{};

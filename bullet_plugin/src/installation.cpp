@@ -179,7 +179,13 @@ void Installation::collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, p
   addCounts(ab_counts);
   addCounts(ba_counts);
   const std::size_t contacts = ab_counts.contacts + ba_counts.contacts;
-  if (isRunaway(a, b, contacts) && ++stats_.runaway_pairs == 1) {
+  const bool runaway = isRunaway(a, b, contacts);
+  if (runaway && settings_.runaway_fallback && settings_.exact != ExactTest::Continuous &&
+      settings_.sensors.motion_bound == psc::MotionBound::Radius && !sensors_.pairAhead(id_a, id_b)) {
+    sensors_.setPairAhead(id_a, id_b, true);
+    ++stats_.runaway_fallbacks;
+  }
+  if (runaway && ++stats_.runaway_pairs == 1) {
     const btSoftBody::tSoftBodyArray& all = world_.getSoftBodyArray();
     stats_.runaway = "psc::bullet: runaway contact between soft bodies " + std::to_string(all.findLinearSearch(&a)) +
                      " and " + std::to_string(all.findLinearSearch(&b)) + " of the world: " +

@@ -149,6 +149,14 @@ class SensorWorld {
   /// The body's self contact radius (selfContactRadius of its margin and rest shape); 0 when its
   /// self-collision is off. Self contacts should be made at this distance, not 2 × margin.
   double selfRadius(BodyId id) const;
+  /// [beyond] The motion bound of one body pair with MotionBound::Radius: `ahead` = true hands the
+  /// pair's exact test only what MotionBound::Ahead keeps (the pairs within the margins now and
+  /// those the vertex and the triangle head into during the next ahead_steps steps) until the two
+  /// bodies' grown boxes part; then the pair is back on the radius bound. For a pair whose contacts
+  /// feed on the motion term of Bullet's radius (a runaway: psc::bullet does this when it sees
+  /// one). Ignored with the other motion bounds and in the thesis's mode. Throws for unknown ids.
+  void setPairAhead(BodyId a, BodyId b, bool ahead);
+  bool pairAhead(BodyId a, BodyId b) const;
   /// The mesh itself changed (vertex count, triangles): rebuilds the topology and repartitions.
   void replaceMesh(BodyId id, std::vector<Triangle> triangles, const PositionView& positions,
                    const PositionView& previous = {});

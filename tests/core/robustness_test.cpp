@@ -782,6 +782,97 @@ TEST(HardConditions, AheadBoundKeepsTheMarginsAndWhatTheMotionHeadsInto) {
   EXPECT_LT(candidates_ahead, candidates_radius / 2) << "ahead " << candidates_ahead << ", radius " << candidates_radius;
 }
 
+// SensorWorld::setPairAhead puts one body pair on the Ahead bound (what psc::bullet does for a
+// pair that runs away): that pair's candidates are exactly those of a world on MotionBound::Ahead,
+// every other pair keeps the radius bound's, and once the two bodies' boxes part the pair is back on
+// the radius bound. A ball flies through a sheet as above; a second ball rests on the sheet.
+TEST(HardConditions, APairOnTheAheadBoundGetsAheadsCandidatesUntilItsBodiesPart) {
+  std::vector<Body> bodies = sheetAndBall();
+  bodies.push_back(bodies[1]);
+  bodies[2].name = "resting ball";
+  const TriMesh sheet_rest = bodies[0].mesh, ball_rest = bodies[1].mesh;
+  const auto pose = [&](int step, double away) {
+    bodies[0].mesh.vertices = sheet_rest.vertices;
+    bodies[1].mesh.vertices = ball_rest.vertices;
+    for (Vec3& p : bodies[1].mesh.vertices) p += Vec3(-0.6 + 0.04 * step + away, 0.1, 0.8 - 0.1 * step);
+    bodies[2].mesh.vertices = ball_rest.vertices;
+    for (Vec3& p : bodies[2].mesh.vertices) p += Vec3(1.5, 1.5, 0.41 - 0.005 * step);
+  };
+  pose(0, 0.0);
+  SensorSettings settings;
+  settings.motion_bound = MotionBound::Ahead;
+  SensorWorld ahead(settings), radius, paired;
+  addAll(ahead, bodies);
+  for (Body& b : bodies) b.id = radius.addBody(descOf(b));
+  for (Body& b : bodies) b.id = paired.addBody(descOf(b));
+  const BodyId sheet = bodies[0].id, ball = bodies[1].id, resting = bodies[2].id;
+  EXPECT_THROW(paired.setPairAhead(sheet, 99, true), Error);
+  EXPECT_THROW(paired.setPairAhead(ball, ball, true), Error);
+  using Key = std::tuple<BodyId, Index, BodyId, Index>;
+  const auto of = [&](const StepResult& r, bool flying) {
+    std::vector<Key> keys;
+    for (const CandidatePair& c : r.candidates) {
+      const bool pair_is_flying = (c.vertex_body == ball) != (c.triangle_body == ball);
+      if (pair_is_flying == flying) keys.push_back({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+    }
+    return keys;
+  };
+  std::size_t flying = 0, rest = 0, fewer = 0;
+  bool set = false;
+  std::vector<Vec3> prev[3];
+  for (int i = 0; i < 3; ++i) prev[i] = bodies[i].mesh.vertices;
+  const auto stepAll = [&](int step, double away) {
+    pose(step, away);
+    for (SensorWorld* w : {&ahead, &radius, &paired})
+      for (int i = 0; i < 3; ++i)
+        w->setPositions(bodies[i].id, PositionView::of(bodies[i].mesh.vertices), PositionView::of(prev[i]));
+  };
+  // The worlds read the positions where they are (views): the previous ones change after the steps.
+  const auto keep = [&] {
+    for (int i = 0; i < 3; ++i) prev[i] = bodies[i].mesh.vertices;
+  };
+  for (int step = 1; step <= 12; ++step) {
+    stepAll(step, 0.0);
+    const StepResult& a = ahead.step();
+    const std::vector<Key> a_fly = of(a, true);
+    const StepResult& r = radius.step();
+    const std::vector<Key> r_fly = of(r, true), r_rest = of(r, false);
+    const StepResult& p = paired.step();
+    EXPECT_TRUE(of(p, false) == r_rest) << "step " << step << ": the other pairs keep the radius bound";
+    if (set) {
+      EXPECT_TRUE(of(p, true) == a_fly) << "step " << step << ": the pair on the Ahead bound";
+      EXPECT_TRUE(paired.pairAhead(sheet, ball)) << "step " << step << ": the bodies still overlap";
+      flying += a_fly.size();
+      fewer += r_fly.size() - a_fly.size();
+    } else {
+      EXPECT_TRUE(of(p, true) == r_fly) << "step " << step << ": not yet on the Ahead bound";
+      if (!r_fly.empty()) {  // as psc::bullet does on a runaway: from the next step on
+        paired.setPairAhead(ball, sheet, true);  // either order
+        EXPECT_TRUE(paired.pairAhead(sheet, ball));
+        EXPECT_FALSE(paired.pairAhead(sheet, resting));
+        set = true;
+      }
+    }
+    rest += r_rest.size();
+    keep();
+  }
+  EXPECT_GT(flying, 20u) << "the ball must meet the sheet";
+  EXPECT_GT(rest, 20u) << "the resting ball must touch the sheet";
+  EXPECT_GT(fewer, 20u) << "Ahead must differ from Radius on the flying ball";
+  // Far away: the boxes part and the pair is released; back on the sheet it has Radius's candidates.
+  for (int i = 0; i < 2; ++i) {  // the jump's motion term still reaches; resting far away it does not
+    stepAll(12, 50.0);
+    paired.step();
+    radius.step();
+    keep();
+  }
+  EXPECT_FALSE(paired.pairAhead(sheet, ball));
+  stepAll(5, 0.0);  // back in one jump: the radius bound's candidates
+  const std::vector<Key> back = of(paired.step(), true);
+  EXPECT_FALSE(back.empty());
+  EXPECT_TRUE(back == of(radius.step(), true));
+}
+
 TEST(HardConditions, StretchedToTwiceItsSizeRepartitionsAndStillFindsContacts) {
   std::vector<Body> bodies(2);
   bodies[0].mesh = makeSphere(1.0, 400);

@@ -228,14 +228,16 @@ TEST(Scenes, DeterministicAndHonourTheirParameters) {
   }
 }
 
-TEST(Scenes, FastImpactRunsAwayWithTheRadiusBoundButNotAhead) {
+TEST(Scenes, FastImpactRunsAwayWithTheRadiusBoundButNotAheadNorWithTheFallback) {
   // fast_impact's penetration with Bullet's exact test (0.41 deep at 1,000 vertices) has one cause:
   // a complete midphase hands CollideVF_SS every pair inside margins + 2|dx|, Bullet's response
   // pushes each approaching node out to that whole radius, the node comes back faster with a
   // larger radius, and the contacts feed on themselves (docs/BENCHMARK.md, "Runaways"). At 600
   // vertices the same runaway shows within 60 steps. MotionBound::Ahead hands over only the pairs
   // within the margins or headed into contact: no runaway, fewer tests than Bullet's own path, no
-  // penetration, and still every strict contact Bullet can test.
+  // penetration, and still every strict contact Bullet can test. With the runaway fallback
+  // (psc::bullet::Settings::runaway_fallback) the radius bound runs away once, then the pair goes on
+  // the ahead bound: one runaway step, fewer tests than Bullet's own path, no deeper than it.
   if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
   SceneParams p;
   p.resolution = 600;
@@ -243,13 +245,16 @@ TEST(Scenes, FastImpactRunsAwayWithTheRadiusBoundButNotAhead) {
   RunOptions o;
   o.truth = TruthMode::Strict;
   const RunResult radius = runPipeline(scene, Pipeline::Sensors, o);
+  o.runaway_fallback = true;
+  const RunResult fallback = runPipeline(scene, Pipeline::Sensors, o);
+  o.runaway_fallback = false;
   o.motion_bound = "ahead";
   const RunResult ahead = runPipeline(scene, Pipeline::Sensors, o);
   const RunResult bullet = runPipeline(scene, Pipeline::Bullet, o);
-  for (const RunResult* r : {&radius, &ahead, &bullet})
-    std::printf("fast_impact 600v %s (%s): runaway steps %zu, exact/step %.1f, max pen %.3f, strict testable %.4f\n",
-                toString(r->pipeline), r->motion_bound.c_str(), r->runaway_steps, r->exact_tests_per_step,
-                r->max_penetration, r->recall_strict_testable);
+  for (const RunResult* r : {&radius, &fallback, &ahead, &bullet})
+    std::printf("fast_impact 600v %s (%s%s): runaway steps %zu, exact/step %.1f, max pen %.3f, strict testable %.4f\n",
+                toString(r->pipeline), r->motion_bound.c_str(), r->runaway_fallback ? ", fallback" : "", r->runaway_steps,
+                r->exact_tests_per_step, r->max_penetration, r->recall_strict_testable);
   EXPECT_EQ(radius.motion_bound, "radius");
   EXPECT_EQ(ahead.motion_bound, "ahead");
   EXPECT_GT(radius.runaway_steps, 0u) << "the scene no longer shows the runaway it is kept for";
@@ -259,6 +264,11 @@ TEST(Scenes, FastImpactRunsAwayWithTheRadiusBoundButNotAhead) {
   EXPECT_LE(ahead.max_penetration, bullet.max_penetration);
   EXPECT_EQ(ahead.recall_strict_testable, 1.0);
   EXPECT_EQ(radius.recall_strict_testable, 1.0);
+  EXPECT_TRUE(fallback.runaway_fallback);
+  EXPECT_EQ(fallback.runaway_steps, 1u) << "one runaway step, then the pair is on the ahead bound";
+  EXPECT_LT(fallback.exact_tests_per_step, bullet.exact_tests_per_step);
+  EXPECT_LE(fallback.max_penetration, bullet.max_penetration);
+  EXPECT_EQ(fallback.recall_strict_testable, 1.0);
 }
 
 TEST(Scenes, HeadOnMeasurementChain) {

@@ -54,6 +54,14 @@ struct Settings {
   /// tests than Bullet's own path, and still every contact within the margins; but resting bodies
   /// lose the contacts of nodes that move away or sideways, which Radius's completeness keeps.
   psc::SensorSettings sensors;
+  /// [beyond] With `sensors.motion_bound` = Radius and the discrete tests (Bullet, Robust): a body
+  /// pair that runs away (Stats::runaway_pairs) is put on the Ahead bound from the next step on,
+  /// until its bodies' boxes part (psc::SensorWorld::setPairAhead); Stats::runaway_fallbacks counts
+  /// them, and the runaway is still reported. Every other pair, and this one before its runaway,
+  /// keeps the radius bound's completeness. Off by default: once on Ahead the pair no longer gets
+  /// every contact Bullet's radius accepts (README, "Fast bodies with Bullet's test", for what it
+  /// changes on the fast scenes).
+  bool runaway_fallback = false;
   OptIn opt_in = OptIn::VfSsFlag;
   /// [beyond] Also collide participating body pairs that have candidates but were not dispatched
   /// because their broadphase boxes do not overlap. Bullet 3.24 bounds a soft body by its nodes

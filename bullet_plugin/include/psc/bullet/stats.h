@@ -52,6 +52,8 @@ struct Stats {
   /// and Bullet's contact response is feeding on itself (each contact pushes its node out to
   /// margin + 2·|Δx|). Contact counts of such pairs grow without bound over the following steps.
   std::size_t runaway_pairs = 0;
+  /// Of those, the pairs put on the Ahead bound this step (Settings::runaway_fallback).
+  std::size_t runaway_fallbacks = 0;
   /// A warning for the first runaway pair this step, naming the two bodies (their indices in the
   /// world's soft body array) and the contact count; empty when there was none.
   std::string runaway;
