@@ -548,44 +548,10 @@ void sweepWithin(std::vector<SweepItem>& a, F&& f) {
     for (std::size_t k = i + 1; k < a.size() && a[k].lo <= a[i].hi; ++k) f(a[i].id, a[k].id);
 }
 
-/// Squared distance from p to the triangle (a, b, c), by the closest point's Voronoi region
-/// (Ericson, Real-Time Collision Detection, 5.1.5). Degenerate triangles give the distance to
-/// their edges' closest point or a vertex, never NaN.
-double pointTriangleDistance2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0.0 && d2 <= 0.0) return ap.squaredNorm();
-  const Vec3 bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0.0 && d4 <= d3) return bp.squaredNorm();
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 && d1 - d3 > 0.0) return (p - (a + d1 / (d1 - d3) * ab)).squaredNorm();
-  const Vec3 cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0.0 && d5 <= d6) return cp.squaredNorm();
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 && d2 - d6 > 0.0) return (p - (a + d2 / (d2 - d6) * ac)).squaredNorm();
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 && (d4 - d3) + (d5 - d6) > 0.0)
-    return (p - (b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b))).squaredNorm();
-  const double sum = va + vb + vc;
-  if (!(std::abs(sum) > 0.0)) {  // degenerate: the nearest of the three edges
-    const auto seg = [&](const Vec3& x, const Vec3& y) {
-      const Vec3 d = y - x;
-      const double l2 = d.squaredNorm();
-      const double t = l2 > 0.0 ? std::clamp((p - x).dot(d) / l2, 0.0, 1.0) : 0.0;
-      return (p - (x + t * d)).squaredNorm();
-    };
-    return std::min({seg(a, b), seg(b, c), seg(c, a)});
-  }
-  const double v = vb / sum, w = vc / sum;
-  return (p - (a + v * ab + w * ac)).squaredNorm();
-}
-
-/// The candidate filter's squared distance from p to the triangle (a, b, c), without a branch:
-/// the least of the distances to the three edges and, where p projects inside the triangle, the
-/// distance to its plane. The same value as pointTriangleDistance2 up to rounding; its AVX2 twin
-/// (distances4Avx2) makes the same operations in the same order, so the two give the same bits and
+/// The squared distance from p to the triangle (a, b, c), without a branch: the least of the
+/// distances to the three edges and, where p projects inside the triangle, the distance to its
+/// plane (the candidate filter's, and the self exclusion rule's at rest). Its AVX2 twin
+/// (FilterDistance4) makes the same operations in the same order, so the two give the same bits and
 /// the same candidates. Degenerate edges and triangles give the distance to their points, never NaN.
 struct FilterDistance {
   static double dot(double ax, double ay, double az, double bx, double by, double bz) {
@@ -772,7 +738,7 @@ bool excludedSelfPair(const PairContext& ctx, Index v, const Triangle& tri) {
   const Vec3 &a = rest[tri[0]], &b = rest[tri[1]], &c = rest[tri[2]];
   const double e2 = ctx.self_exclude2;
   if ((a - p).squaredNorm() < e2 || (b - p).squaredNorm() < e2 || (c - p).squaredNorm() < e2) return true;
-  return pointTriangleDistance2(p, a, b, c) < e2;
+  return FilterDistance::of(p, a, b, c) < e2;
 }
 
 void gatherVertices(const PairContext& ctx, ChunkRef& c) {
@@ -1256,10 +1222,11 @@ class Collector {
 
   void bodyPair(const Body& A, const Body& B) {
     ++counters_.body_pairs;
-    pair_ahead_steps_ = params_.ahead_steps;
-    if (pair_ahead_steps_ == 0.0 && !params_.swept && params_.ahead_pairs != nullptr &&
-        std::binary_search(params_.ahead_pairs->begin(), params_.ahead_pairs->end(), std::make_pair(A.id, B.id)))
-      pair_ahead_steps_ = params_.pair_ahead_steps;
+    // The pair's motion bound: Ahead for the whole world, or for this pair (SensorWorld::setPairAhead).
+    const bool pair_ahead = params_.ahead_steps == 0.0 && !params_.swept && params_.ahead_pairs != nullptr &&
+                            std::binary_search(params_.ahead_pairs->begin(), params_.ahead_pairs->end(),
+                                               std::make_pair(A.id, B.id));
+    const double ahead_steps = pair_ahead ? params_.pair_ahead_steps : params_.ahead_steps;
     const Grown boxA = grown(A.body_box, A.margin, params_.motion_factor);
     const Grown boxB = grown(B.body_box, B.margin, params_.motion_factor);
     // Sweep along the longest axis of the two bodies' common box.
@@ -1280,7 +1247,7 @@ class Collector {
     // Bullet's contact solver is Gauss-Seidel: contacts in mesh order (not in sweep order) keep
     // its result independent of the sweep axis and measured better on resting stacks.
     std::sort(region_pairs_.begin(), region_pairs_.end());
-    for (const auto& [ri, rj] : region_pairs_) regionPair(A, ri, B, rj, ab.keys, ba.keys);
+    for (const auto& [ri, rj] : region_pairs_) regionPair(A, ri, B, rj, ab.keys, ba.keys, ahead_steps);
     if (!ab.keys.empty()) groups.push_back(std::move(ab));
     if (!ba.keys.empty()) groups.push_back(std::move(ba));
   }
@@ -1397,8 +1364,9 @@ class Collector {
   }
 
  private:
+  /// `ahead_steps`: the body pair's PairContext::ahead_steps (0: not on the Ahead bound).
   void regionPair(const Body& A, Index ri, const Body& B, Index rj, std::vector<std::uint64_t>& ab_keys,
-                  std::vector<std::uint64_t>& ba_keys) {
+                  std::vector<std::uint64_t>& ba_keys, double ahead_steps) {
     const double mf = params_.motion_factor;
     const Grown boxI = grown(A.region_box[ri], A.margin, mf);
     const Grown boxJ = grown(B.region_box[rj], B.margin, mf);
@@ -1435,9 +1403,9 @@ class Collector {
 
     const auto t0 = std::chrono::steady_clock::now();
     const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab_keys, counters_, s_,
-                           -1.0, nullptr, pair_ahead_steps_};
+                           -1.0, nullptr, ahead_steps};
     const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba_keys, counters_, s_,
-                           -1.0, nullptr, pair_ahead_steps_};
+                           -1.0, nullptr, ahead_steps};
     const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
     s_.items_a.clear();
     s_.items_b.clear();
@@ -1513,7 +1481,6 @@ class Collector {
   Scratch s_;
   std::vector<std::pair<Index, Index>> region_pairs_, chunk_pairs_;
   std::vector<Grown> self_boxes_;
-  double pair_ahead_steps_ = 0.0;  ///< the body pair's PairContext::ahead_steps
 };
 
 }  // namespace

@@ -539,12 +539,12 @@ const StepResult& SensorWorld::step() {
                                            : detail::overlappingBodies(ordered, params);
   if (!w.ahead_pairs.empty()) {
     // A pair on the Ahead bound goes back to the radius once its bodies' grown boxes part.
+    // body_pairs are sorted and `ordered` ascends by id, so `still` comes out sorted.
     std::vector<std::pair<BodyId, BodyId>> still;
     for (const auto& [i, j] : body_pairs) {
-      const std::pair<BodyId, BodyId> key(ordered[i]->id, ordered[j]->id);  // ordered by id
+      const std::pair<BodyId, BodyId> key(ordered[i]->id, ordered[j]->id);
       if (std::binary_search(w.ahead_pairs.begin(), w.ahead_pairs.end(), key)) still.push_back(key);
     }
-    std::sort(still.begin(), still.end());
     w.ahead_pairs.swap(still);
     params.ahead_pairs = &w.ahead_pairs;
     params.pair_ahead_steps = w.settings.ahead_steps;

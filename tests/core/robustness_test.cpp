@@ -16,6 +16,7 @@
 #include <cstring>
 #include <functional>
 #include <initializer_list>
+#include <initializer_list>
 #include <limits>
 #include <random>
 #include <set>
@@ -638,25 +639,46 @@ std::vector<Body> sheetAndBall() {
   return bodies;
 }
 
+/// sheetAndBall() in motion for the motion-bound tests: at step k the sheet is raised by sheet_dz·k
+/// and the ball moved to ball_start + ball_velocity·k, every vertex with its own random jitter.
+/// moveTo(k) makes the positions of step k current and those of the step before previous, and
+/// hands both to `worlds`.
+struct FlyingBall {
+  std::vector<Body> bodies = sheetAndBall();
+  const TriMesh sheet_rest = bodies[0].mesh, ball_rest = bodies[1].mesh;
+  std::mt19937 rng;
+  std::uniform_real_distribution<double> jitter;
+  double sheet_dz;
+  Vec3 ball_start, ball_velocity;
+
+  FlyingBall(unsigned seed, double jitter_size, double sheet_dz_, const Vec3& start, const Vec3& velocity)
+      : rng(seed), jitter(-jitter_size, jitter_size), sheet_dz(sheet_dz_), ball_start(start), ball_velocity(velocity) {
+    pose(0);
+  }
+  void moveTo(int step, std::initializer_list<SensorWorld*> worlds) {
+    for (Body& b : bodies) b.previous = b.mesh.vertices;
+    pose(step);
+    for (SensorWorld* w : worlds)
+      for (Body& b : bodies) w->setPositions(b.id, PositionView::of(b.mesh.vertices), PositionView::of(b.previous));
+  }
+
+ private:
+  void pose(int step) {
+    bodies[0].mesh.vertices = sheet_rest.vertices;
+    for (Vec3& p : bodies[0].mesh.vertices) p += Vec3(jitter(rng), jitter(rng), sheet_dz * step + jitter(rng));
+    bodies[1].mesh.vertices = ball_rest.vertices;
+    for (Vec3& p : bodies[1].mesh.vertices)
+      p += ball_start + step * ball_velocity + Vec3(jitter(rng), jitter(rng), jitter(rng));
+  }
+};
+
 // MotionBound::Swept: every (vertex, triangle) pair that comes within the margins at some time of
 // the step (both moving linearly) is a candidate. Reference: the distance at 65 times of the step
 // (a pair found at a sampled time certainly meets the margins), by brute force. Both bodies move,
 // every vertex with its own random jitter, and the ball crosses several regions per step.
 TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
-  std::vector<Body> bodies = sheetAndBall();
-  const TriMesh sheet_rest = bodies[0].mesh, ball_rest = bodies[1].mesh;
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<double> jitter(-0.03, 0.03);
-  const auto pose = [&](int step, std::vector<Vec3>& sheet, std::vector<Vec3>& ball) {
-    sheet = sheet_rest.vertices;
-    for (Vec3& p : sheet) p += Vec3(jitter(rng), jitter(rng), 0.1 * step + jitter(rng));
-    ball = ball_rest.vertices;
-    for (Vec3& p : ball) p += Vec3(-2.5 + 0.9 * step, -1.0 + 0.5 * step, 1.2 - 0.35 * step) + Vec3(jitter(rng), jitter(rng), jitter(rng));
-  };
-  std::vector<Vec3> prev_sheet, prev_ball;
-  pose(0, prev_sheet, prev_ball);
-  bodies[0].mesh.vertices = prev_sheet;
-  bodies[1].mesh.vertices = prev_ball;
+  FlyingBall fly(7, 0.03, 0.1, Vec3(-2.5, -1.0, 1.2), Vec3(0.9, 0.5, -0.35));
+  std::vector<Body>& bodies = fly.bodies;
   SensorSettings settings;
   settings.motion_bound = MotionBound::Swept;
   SensorWorld swept(settings), radius;
@@ -664,15 +686,7 @@ TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
   for (Body& b : bodies) b.id = radius.addBody(descOf(b));
   std::size_t met = 0, candidates_swept = 0, candidates_radius = 0;
   for (int step = 1; step <= 6; ++step) {
-    std::vector<Vec3> sheet, ball;
-    pose(step, sheet, ball);
-    bodies[0].previous = prev_sheet;
-    bodies[1].previous = prev_ball;
-    bodies[0].mesh.vertices = sheet;
-    bodies[1].mesh.vertices = ball;
-    for (SensorWorld* w : {&swept, &radius})
-      for (Body& b : bodies)
-        w->setPositions(b.id, PositionView::of(b.mesh.vertices), PositionView::of(b.previous));
+    fly.moveTo(step, {&swept, &radius});
     const StepResult& res = swept.step();
     std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
     for (const CandidatePair& c : res.candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
@@ -696,8 +710,6 @@ TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
               << "step " << step << ": " << a.name << " vertex " << v << " meets " << b.name << " triangle " << t;
         }
     }
-    prev_sheet = sheet;
-    prev_ball = ball;
   }
   EXPECT_GT(met, 50u) << "the ball must cross the sheet";
   // A fast vertex reaches half its step about its path's midpoint, not twice its step about its end.
@@ -709,20 +721,8 @@ TEST(HardConditions, AheadBoundKeepsTheMarginsAndWhatTheMotionHeadsInto) {
   // pairs inside Bullet's radius (margins + 2|dx|, MotionBound::Radius) the ahead bound must keep
   // every pair within the margins now and every pair whose paths ahead (x + s·dx, s in [0, 1], for
   // the vertex and each corner) come within the margins, and nothing Radius does not keep.
-  std::vector<Body> bodies = sheetAndBall();
-  const TriMesh sheet_rest = bodies[0].mesh, ball_rest = bodies[1].mesh;
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<double> jitter(-0.02, 0.02);
-  const auto pose = [&](int step, std::vector<Vec3>& sheet, std::vector<Vec3>& ball) {
-    sheet = sheet_rest.vertices;
-    for (Vec3& p : sheet) p += Vec3(jitter(rng), jitter(rng), 0.02 * step + jitter(rng));
-    ball = ball_rest.vertices;
-    for (Vec3& p : ball) p += Vec3(-0.6 + 0.12 * step, 0.1, 1.5 - 0.3 * step) + Vec3(jitter(rng), jitter(rng), jitter(rng));
-  };
-  std::vector<Vec3> prev_sheet, prev_ball;
-  pose(0, prev_sheet, prev_ball);
-  bodies[0].mesh.vertices = prev_sheet;
-  bodies[1].mesh.vertices = prev_ball;
+  FlyingBall fly(11, 0.02, 0.02, Vec3(-0.6, 0.1, 1.5), Vec3(0.12, 0.0, -0.3));
+  std::vector<Body>& bodies = fly.bodies;
   SensorSettings settings;
   settings.motion_bound = MotionBound::Ahead;
   SensorWorld ahead(settings), radius;
@@ -730,15 +730,7 @@ TEST(HardConditions, AheadBoundKeepsTheMarginsAndWhatTheMotionHeadsInto) {
   for (Body& b : bodies) b.id = radius.addBody(descOf(b));
   std::size_t within_margins = 0, headed = 0, candidates_ahead = 0, candidates_radius = 0;
   for (int step = 1; step <= 9; ++step) {
-    std::vector<Vec3> sheet, ball;
-    pose(step, sheet, ball);
-    bodies[0].previous = prev_sheet;
-    bodies[1].previous = prev_ball;
-    bodies[0].mesh.vertices = sheet;
-    bodies[1].mesh.vertices = ball;
-    for (SensorWorld* w : {&ahead, &radius})
-      for (Body& b : bodies)
-        w->setPositions(b.id, PositionView::of(b.mesh.vertices), PositionView::of(b.previous));
+    fly.moveTo(step, {&ahead, &radius});
     using Key = std::tuple<BodyId, Index, BodyId, Index>;
     std::set<Key> kept_ahead, kept_radius;
     for (const CandidatePair& c : ahead.step().candidates) kept_ahead.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
@@ -773,8 +765,6 @@ TEST(HardConditions, AheadBoundKeepsTheMarginsAndWhatTheMotionHeadsInto) {
         }
       }
     }
-    prev_sheet = sheet;
-    prev_ball = ball;
   }
   EXPECT_GT(within_margins, 20u) << "the ball must touch the sheet";
   EXPECT_GT(headed, 20u) << "the ball must head into the sheet";
