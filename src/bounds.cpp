@@ -687,11 +687,48 @@ struct KeptTriangles {
   std::size_t count_ = 0;
 };
 
+/// What the picking pass of chunkCandidates reads of each gathered vertex, as a structure of arrays
+/// parallel to Scratch::verts (four vertices per instruction with AVX2).
+struct VertexLanes {
+  std::vector<double> x, y, z, r, n;
+  void clear() {
+    for (std::vector<double>* v : {&x, &y, &z, &r, &n}) v->clear();
+  }
+  void push(const VertexRec& vr) {
+    x.push_back(vr.x.x());
+    y.push_back(vr.x.y());
+    z.push_back(vr.x.z());
+    r.push_back(vr.r);
+    n.push_back(vr.xn);
+  }
+};
+
+/// What the kept-triangle pass of chunkCandidates reads of each gathered triangle, as a structure
+/// of arrays parallel to Scratch::tris.
+struct TriangleLanes {
+  std::vector<double> lo_x, lo_y, lo_z, hi_x, hi_y, hi_z, n_lo, n_hi;
+  void clear() {
+    for (std::vector<double>* v : {&lo_x, &lo_y, &lo_z, &hi_x, &hi_y, &hi_z, &n_lo, &n_hi}) v->clear();
+  }
+  void push(const TriangleRec& tr) {
+    lo_x.push_back(tr.lo.x());
+    lo_y.push_back(tr.lo.y());
+    lo_z.push_back(tr.lo.z());
+    hi_x.push_back(tr.hi.x());
+    hi_y.push_back(tr.hi.y());
+    hi_z.push_back(tr.hi.z());
+    n_lo.push_back(tr.nlo);
+    n_hi.push_back(tr.nhi);
+  }
+};
+
 struct Scratch {
   std::vector<SweepItem> items_a, items_b;
   std::vector<ChunkRef> near_a, near_b;
   std::vector<VertexRec> verts;
+  VertexLanes vert_lanes;
   std::vector<TriangleRec> tris;
+  TriangleLanes tri_lanes;
   std::vector<TriangleCorners> corners;
   KeptTriangles kept;
   std::vector<Index> hits;
@@ -702,7 +739,9 @@ struct Scratch {
   /// Forgets the gathered vertex and triangle records (ChunkRef's offsets must be reset with them).
   void clearRecords() {
     verts.clear();
+    vert_lanes.clear();
     tris.clear();
+    tri_lanes.clear();
     corners.clear();
   }
 };
@@ -746,18 +785,20 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
   c.vertices_at = static_cast<int>(ctx.s.verts.size());
   const bool swept = ctx.swept && !ctx.vb.previous.empty();
   const bool self_motion = ctx.self_mean_motion != nullptr && !ctx.vb.previous.empty();
+  const bool moved = !ctx.vb.previous.empty();
   for (Index v : ctx.vb.chunks.vertices(c.chunk)) {
     Vec3 x = ctx.vb.positions[v];
-    const double motion =
-        self_motion ? selfMotion(x - ctx.vb.previous[v], *ctx.self_mean_motion) : ctx.vb.vertexMotion(v);
+    const Vec3 q = moved ? ctx.vb.previous[v] : x;
+    // Body::vertexMotion, or the self motion term.
+    const double motion = self_motion ? selfMotion(x - q, *ctx.self_mean_motion) : moved ? (x - q).norm() : 0.0;
     double r = ctx.margin_sum + ctx.motion_factor * motion;
     if (swept) {
       // The ball about the path's midpoint with half its length holds the whole path.
-      const Vec3 q = ctx.vb.previous[v];
       r = ctx.margin_sum + 0.5 * (x - q).norm();
       x = 0.5 * (x + q);
     }
     ctx.s.verts.push_back({x, r, ctx.axis.valid ? ctx.axis.project(x) : 0.0, v, swept ? 0.0 : reachOf(x, r)});
+    ctx.s.vert_lanes.push(ctx.s.verts.back());
   }
   ctx.counters.candidate_vertices += ctx.vb.chunks.vertices(c.chunk).size();
 }
@@ -795,6 +836,7 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
       }
     }
     ctx.s.tris.push_back(rec);
+    ctx.s.tri_lanes.push(rec);
     ctx.s.corners.push_back({a, b, cc, ch.triangleId(c.chunk, at), static_cast<Index>(at)});
   }
   ctx.counters.candidate_triangles += ch.triangleCount(c.chunk);
@@ -1017,12 +1059,16 @@ void keepWithinReach(const PairContext& ctx, const VertexRec* recs) {
   Scratch& s = ctx.s;
   const std::size_t n = s.pending.size();
   std::size_t i = 0;
+  // About half the pairs pass, so each is written and the count moves on when it does (a branch
+  // would be mispredicted); the slots left over are cut off at the end.
+  const std::size_t first = ctx.out.size();
+  ctx.out.resize(first + n);
+  std::uint64_t* out = ctx.out.data() + first;
+  std::size_t kept = 0;
   const auto decide = [&](std::size_t at, double d2) {
     const VertexRec& vr = recs[s.pending[at].first];
-    if (d2 < vr.reach2)
-      ctx.out.push_back((std::uint64_t{vr.v} << 32) | s.corners[s.pending[at].second].t);
-    else
-      ++ctx.counters.candidates_beyond_reach;
+    out[kept] = (std::uint64_t{vr.v} << 32) | s.corners[s.pending[at].second].t;
+    kept += static_cast<std::size_t>(d2 < vr.reach2);
   };
 #if defined(PSC_HAVE_AVX2_PATH)
   if (useAvx2Probes()) {
@@ -1046,8 +1092,113 @@ void keepWithinReach(const PairContext& ctx, const VertexRec* recs) {
     const TriangleCorners& tc = s.corners[s.pending[i].second];
     decide(i, FilterDistance::of(recs[s.pending[i].first].x, tc.a, tc.b, tc.c));
   }
+  ctx.out.resize(first + kept);
+  ctx.counters.candidates_beyond_reach += n - kept;
   s.pending.clear();
 }
+
+/// The picking pass of chunkCandidates, one vertex at a time: of the `nv` vertices from `at` in
+/// `lanes`, the indices (from 0) of those within their radius r of [lo_n, hi_n] along the sensor
+/// axis (±infinity without sensors) and of the box `tbox`, into `picked`, in order; returns how
+/// many, and adds to `dropped` those outside the slab. Starts at vertex `from`, after `n` picks.
+std::size_t pickScalar(const VertexLanes& lanes, std::size_t at, std::size_t from, std::size_t nv, std::size_t n,
+                       const MotionBox& tbox, double lo_n, double hi_n, Index* picked, std::size_t& dropped) {
+  for (std::size_t i = from; i < nv; ++i) {
+    const double x = lanes.x[at + i], y = lanes.y[at + i], z = lanes.z[at + i], r = lanes.r[at + i];
+    const double xn = lanes.n[at + i];
+    const bool in_slab = (xn + r >= lo_n) & (xn - r <= hi_n);
+    const bool in_box = (x >= tbox.lo.x() - r) & (y >= tbox.lo.y() - r) & (z >= tbox.lo.z() - r) &
+                        (x <= tbox.hi.x() + r) & (y <= tbox.hi.y() + r) & (z <= tbox.hi.z() + r);
+    picked[n] = static_cast<Index>(i);
+    n += static_cast<std::size_t>(in_slab & in_box);
+    dropped += static_cast<std::size_t>(!in_slab);
+  }
+  return n;
+}
+
+/// The kept-triangle pass of chunkCandidates, one triangle at a time: of the `nt` triangles from
+/// `at`, those whose box meets [lo, hi] and whose extent along the sensor axis meets [n_lo, n_hi],
+/// into `kept` in order. Starts at triangle `from`.
+void keepScalar(const Scratch& s, std::size_t at, std::size_t from, std::size_t nt, const Vec3& lo, const Vec3& hi,
+                double n_lo, double n_hi, bool self, KeptTriangles& kept) {
+  for (std::size_t k = from; k < nt; ++k) {
+    const TriangleRec& tr = s.tris[at + k];
+    const bool meets = (tr.lo.x() <= hi.x()) & (tr.lo.y() <= hi.y()) & (tr.lo.z() <= hi.z()) &
+                       (lo.x() <= tr.hi.x()) & (lo.y() <= tr.hi.y()) & (lo.z() <= tr.hi.z()) &
+                       (tr.nhi >= n_lo) & (tr.nlo <= n_hi);
+    if (meets) kept.push(tr, static_cast<Index>(at + k), self);
+  }
+}
+
+#if defined(PSC_HAVE_AVX2_PATH)
+/// pickScalar four vertices per instruction (AVX2): the same comparisons of the same values, so
+/// the same picks. The picked indices are stored without a branch: each lane writes its index and
+/// the count moves on only when it passes.
+[[gnu::target("avx2")]] std::size_t pickAvx2(const VertexLanes& lanes, std::size_t at, std::size_t nv,
+                                             const MotionBox& tbox, double lo_n, double hi_n, Index* picked,
+                                             std::size_t& dropped) {
+  const double *px = lanes.x.data() + at, *py = lanes.y.data() + at, *pz = lanes.z.data() + at;
+  const double *pr = lanes.r.data() + at, *pn = lanes.n.data() + at;
+  const __m256d lx = _mm256_set1_pd(tbox.lo.x()), ly = _mm256_set1_pd(tbox.lo.y()), lz = _mm256_set1_pd(tbox.lo.z());
+  const __m256d hx = _mm256_set1_pd(tbox.hi.x()), hy = _mm256_set1_pd(tbox.hi.y()), hz = _mm256_set1_pd(tbox.hi.z());
+  const __m256d vlo = _mm256_set1_pd(lo_n), vhi = _mm256_set1_pd(hi_n);
+  std::size_t i = 0, n = 0, out = 0;
+  for (; i + 4 <= nv; i += 4) {
+    const __m256d r = _mm256_loadu_pd(pr + i), xn = _mm256_loadu_pd(pn + i);
+    const __m256d x = _mm256_loadu_pd(px + i), y = _mm256_loadu_pd(py + i), z = _mm256_loadu_pd(pz + i);
+    const __m256d slab = _mm256_and_pd(_mm256_cmp_pd(_mm256_add_pd(xn, r), vlo, _CMP_GE_OQ),
+                                       _mm256_cmp_pd(_mm256_sub_pd(xn, r), vhi, _CMP_LE_OQ));
+    const __m256d low = _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(x, _mm256_sub_pd(lx, r), _CMP_GE_OQ),
+                                                    _mm256_cmp_pd(y, _mm256_sub_pd(ly, r), _CMP_GE_OQ)),
+                                      _mm256_cmp_pd(z, _mm256_sub_pd(lz, r), _CMP_GE_OQ));
+    const __m256d high = _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(x, _mm256_add_pd(hx, r), _CMP_LE_OQ),
+                                                     _mm256_cmp_pd(y, _mm256_add_pd(hy, r), _CMP_LE_OQ)),
+                                       _mm256_cmp_pd(z, _mm256_add_pd(hz, r), _CMP_LE_OQ));
+    const int in_slab = _mm256_movemask_pd(slab);
+    const int m = _mm256_movemask_pd(_mm256_and_pd(slab, _mm256_and_pd(low, high)));
+    out += static_cast<std::size_t>(4 - __builtin_popcount(static_cast<unsigned>(in_slab)));
+    for (int l = 0; l < 4; ++l) {
+      picked[n] = static_cast<Index>(i + static_cast<std::size_t>(l));
+      n += static_cast<std::size_t>((m >> l) & 1);
+    }
+  }
+  _mm256_zeroupper();  // as in collectMeetsAvx2: the SSE code after it runs with a clean state
+  dropped += out;
+  return pickScalar(lanes, at, i, nv, n, tbox, lo_n, hi_n, picked, dropped);
+}
+
+/// keepScalar four triangles per instruction (AVX2), for pairs of two bodies: the same comparisons
+/// of the same values, so the same triangles in the same order.
+[[gnu::target("avx2")]] void keepAvx2(const Scratch& s, std::size_t at, std::size_t nt, const Vec3& lo, const Vec3& hi,
+                                      double n_lo, double n_hi, KeptTriangles& kept) {
+  const TriangleLanes& t = s.tri_lanes;
+  const __m256d vlx = _mm256_set1_pd(lo.x()), vly = _mm256_set1_pd(lo.y()), vlz = _mm256_set1_pd(lo.z());
+  const __m256d vhx = _mm256_set1_pd(hi.x()), vhy = _mm256_set1_pd(hi.y()), vhz = _mm256_set1_pd(hi.z());
+  const __m256d vnl = _mm256_set1_pd(n_lo), vnh = _mm256_set1_pd(n_hi);
+  std::size_t k = 0;
+  for (; k + 4 <= nt; k += 4) {
+    const std::size_t j = at + k;
+    const __m256d a = _mm256_and_pd(
+        _mm256_and_pd(_mm256_cmp_pd(_mm256_loadu_pd(t.lo_x.data() + j), vhx, _CMP_LE_OQ),
+                      _mm256_cmp_pd(_mm256_loadu_pd(t.lo_y.data() + j), vhy, _CMP_LE_OQ)),
+        _mm256_and_pd(_mm256_cmp_pd(_mm256_loadu_pd(t.lo_z.data() + j), vhz, _CMP_LE_OQ),
+                      _mm256_cmp_pd(_mm256_loadu_pd(t.n_hi.data() + j), vnl, _CMP_GE_OQ)));
+    const __m256d b = _mm256_and_pd(
+        _mm256_and_pd(_mm256_cmp_pd(vlx, _mm256_loadu_pd(t.hi_x.data() + j), _CMP_LE_OQ),
+                      _mm256_cmp_pd(vly, _mm256_loadu_pd(t.hi_y.data() + j), _CMP_LE_OQ)),
+        _mm256_and_pd(_mm256_cmp_pd(vlz, _mm256_loadu_pd(t.hi_z.data() + j), _CMP_LE_OQ),
+                      _mm256_cmp_pd(_mm256_loadu_pd(t.n_lo.data() + j), vnh, _CMP_LE_OQ)));
+    unsigned m = static_cast<unsigned>(_mm256_movemask_pd(_mm256_and_pd(a, b)));
+    while (m != 0) {
+      const std::size_t l = static_cast<std::size_t>(__builtin_ctz(m));
+      kept.push(s.tris[j + l], static_cast<Index>(j + l), false);
+      m &= m - 1;
+    }
+  }
+  _mm256_zeroupper();
+  keepScalar(s, at, k, nt, lo, hi, n_lo, n_hi, false, kept);
+}
+#endif
 
 // Vertices of chunk cv (of ctx.vb) against the triangles owned by chunk ct (of ctx.tb).
 void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
@@ -1069,18 +1220,19 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
   // each of its triangles) and of its box. Most fail, so they are picked without a branch each
   // (one per vertex would be mispredicted), then the picked ones are probed in order.
   if (s.picked.size() < nv) s.picked.resize(nv);
-  std::size_t n_picked = 0, dropped = 0;
+  std::size_t dropped = 0;
   const VertexRec* recs = s.verts.data() + cv.vertices_at;
-  for (std::size_t i = 0; i < nv; ++i) {
-    const VertexRec& vr = recs[i];
-    const bool in_slab = !sensors || ((vr.xn + vr.r >= ct.lo_n) & (vr.xn - vr.r <= ct.hi_n));
-    const bool in_box = (vr.x.x() >= tbox.lo.x() - vr.r) & (vr.x.y() >= tbox.lo.y() - vr.r) &
-                        (vr.x.z() >= tbox.lo.z() - vr.r) & (vr.x.x() <= tbox.hi.x() + vr.r) &
-                        (vr.x.y() <= tbox.hi.y() + vr.r) & (vr.x.z() <= tbox.hi.z() + vr.r);
-    s.picked[n_picked] = static_cast<Index>(i);
-    n_picked += static_cast<std::size_t>(in_slab & in_box);
-    dropped += static_cast<std::size_t>(!in_slab);
-  }
+  // Without sensors every vertex is in the slab: xn = 0 and r is finite (the refit checked).
+  const double inf = std::numeric_limits<double>::infinity();
+  const double slab_lo = sensors ? ct.lo_n : -inf, slab_hi = sensors ? ct.hi_n : inf;
+  const auto at_v = static_cast<std::size_t>(cv.vertices_at);
+  std::size_t n_picked;
+#if defined(PSC_HAVE_AVX2_PATH)
+  if (avx2)
+    n_picked = pickAvx2(s.vert_lanes, at_v, nv, tbox, slab_lo, slab_hi, s.picked.data(), dropped);
+  else
+#endif
+    n_picked = pickScalar(s.vert_lanes, at_v, 0, nv, 0, tbox, slab_lo, slab_hi, s.picked.data(), dropped);
   ctx.counters.vertices_dropped += dropped;
   for (std::size_t pick = 0; pick < n_picked; ++pick) {
     const VertexRec& vr = recs[s.picked[pick]];
@@ -1095,13 +1247,13 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       const Vec3 lo = vbox.lo.array() - g, hi = vbox.hi.array() + g;
       const double n_lo = sensors ? cv.lo_n - vbox.g - g : -std::numeric_limits<double>::infinity();
       const double n_hi = sensors ? cv.hi_n + vbox.g + g : std::numeric_limits<double>::infinity();
-      for (std::size_t k = 0; k < nt; ++k) {
-        const TriangleRec& tr = s.tris[static_cast<std::size_t>(ct.triangles_at) + k];
-        const bool meets = (tr.lo.x() <= hi.x()) & (tr.lo.y() <= hi.y()) & (tr.lo.z() <= hi.z()) &
-                           (lo.x() <= tr.hi.x()) & (lo.y() <= tr.hi.y()) & (lo.z() <= tr.hi.z()) &
-                           (tr.nhi >= n_lo) & (tr.nlo <= n_hi);
-        if (meets) kept.push(tr, static_cast<Index>(static_cast<std::size_t>(ct.triangles_at) + k), self);
-      }
+      const auto at_t = static_cast<std::size_t>(ct.triangles_at);
+#if defined(PSC_HAVE_AVX2_PATH)
+      if (avx2 && !self)
+        keepAvx2(s, at_t, nt, lo, hi, n_lo, n_hi, kept);
+      else
+#endif
+        keepScalar(s, at_t, 0, nt, lo, hi, n_lo, n_hi, self, kept);
       if (s.hits.size() < nt) s.hits.resize(nt);
       ready = true;
     }
