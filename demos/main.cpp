@@ -68,7 +68,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> scenes;
   SceneParams params;
   std::size_t steps = 0, warmup = 0, frame_every = 1;
-  std::string pipeline = "both", flagging = "default", truth = "both", exact = "bullet", motion_bound = "radius", json, csv, frames, plot_dir;
+  std::string pipeline = "both", flagging = "default", truth = "both", exact = "bullet", motion_bound = "radius", contacts = "all", json, csv, frames, plot_dir;
   std::vector<std::string> sweep, bullet_clusters;
   bool list = false, no_penetration = false, self_collision = false, refit_in_step = false, runaway_fallback = false;
   app.add_option("--scene", scenes, "scene name or number, repeatable, or 'all' (default: all; see --list-scenes)");
@@ -133,6 +133,10 @@ int main(int argc, char** argv) {
   app.add_flag("--runaway-fallback", runaway_fallback,
                "our pipelines with --exact bullet or robust and the radius bound: a body pair that runs away goes "
                "on the ahead bound until its bodies part (psc::bullet::Settings::runaway_fallback)");
+  app.add_option("--contacts", contacts,
+                 "our pipelines: all (every pair the exact test accepts, Bullet's model; default) or nearest (per node "
+                 "and body it touches, the nearest face's contact: psc::bullet::Settings::contacts)")
+      ->check(CLI::IsMember({"all", "nearest"}));
   app.add_flag("--no-penetration", no_penetration, "skip the inside tests after each step");
   app.add_flag("--list-scenes", list, "list the scenes and exit");
   try {
@@ -187,6 +191,7 @@ int main(int argc, char** argv) {
     options.run.self_collision = self_collision;
     options.run.refit_after_predict = !refit_in_step;
     options.run.runaway_fallback = runaway_fallback;
+    options.run.contacts = contacts;
     options.run.frames_dir = frames;
     options.run.frame_every = frame_every;
     options.run.warmup = warmup;

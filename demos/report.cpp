@@ -114,6 +114,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["exact"] = r.exact;
   if (!r.motion_bound.empty()) j["motion_bound"] = r.motion_bound;
   if (r.pipeline != Pipeline::Bullet) j["runaway_fallback"] = r.runaway_fallback;
+  if (!r.contacts.empty()) j["contact_set"] = r.contacts;
   if (r.has_strict) {
     j["recall_strict"] = r.recall_strict;
     j["recall_strict_worst_step"] = r.recall_strict_worst_step;
@@ -167,6 +168,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   }
   if (r.has_full) j["recall_full_worst_step"] = r.recall_full_worst_step;
   j["contacts_found"] = r.contacts_found_total;
+  if (r.contacts == "nearest") j["reduced_contacts"] = r.reduced_contacts_total;
   if (r.has_strict) j["truth_strict_contacts"] = r.truth_strict_total;
   if (r.has_full) j["truth_full_contacts"] = r.truth_full_total;
   if (r.has_strict || r.has_full) j["truth_ambiguous_contacts"] = r.truth_ambiguous;

@@ -228,6 +228,7 @@ RunResult describeRun(const Scene& scene, Pipeline pipeline, const RunOptions& o
   r.exact = pipeline == Pipeline::Bullet ? "bullet" : opt.exact;
   r.motion_bound = pipeline == Pipeline::Bullet ? "" : opt.exact == "continuous" ? "swept" : opt.motion_bound;
   r.runaway_fallback = pipeline != Pipeline::Bullet && opt.runaway_fallback;
+  if (pipeline != Pipeline::Bullet) r.contacts = opt.contacts;
   if (pipeline == Pipeline::Bullet && opt.bullet_clusters > 0) {
     r.bullet_clusters = opt.bullet_clusters;
     r.cluster_self_direct = opt.cluster_self_direct;
@@ -344,9 +345,17 @@ WorldOptions worldOptions(Pipeline pipeline, const RunOptions& opt) {
 
 Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool strict, bool full)
     : scene_(scene), pipeline_(pipeline), opt_(opt), world_(scene, worldOptions(pipeline, opt)) {
-  if (pipeline != Pipeline::Bullet)
-    sensors_ = std::make_unique<SensorPipeline>(world_, coreFlagging(pipeline, opt.flagging), opt.exact, opt.motion_bound,
-                                                opt.self_collision, opt.refit_after_predict, opt.runaway_fallback);
+  if (pipeline != Pipeline::Bullet) {
+    SensorPipeline::Options o;
+    o.flagging = coreFlagging(pipeline, opt.flagging);
+    o.exact = opt.exact;
+    o.motion_bound = opt.motion_bound;
+    o.contacts = opt.contacts;
+    o.self_collision = opt.self_collision;
+    o.refit_after_predict = opt.refit_after_predict;
+    o.runaway_fallback = opt.runaway_fallback;
+    sensors_ = std::make_unique<SensorPipeline>(world_, o);
+  }
   truth_settings_.strict = strict;
   truth_settings_.full = full;
   world_.world().before_collision = [this] {
@@ -572,6 +581,7 @@ void summariseCounts(RunResult& r) {
   for (const StepRecord& rec : r.per_step) {
     const StepCounts& n = rec.n;
     r.contacts_found_total += n.contacts_found;
+    r.reduced_contacts_total += n.reduced_contacts;
     exact_total += n.exact_tests;
     flagged_total += n.flagged_pairs;
     rounds_total += n.rounds;

@@ -81,6 +81,8 @@ struct RunOptions {
   bool refit_after_predict = true;
   /// psc::bullet::Settings::runaway_fallback for our pipelines (--runaway-fallback).
   bool runaway_fallback = false;
+  /// psc::bullet::Settings::contacts for our pipelines: "all" or "nearest" (--contacts).
+  std::string contacts = "all";
   /// > 0: a Bullet cluster run (only with Pipeline::Bullet): generateClusters(bullet_clusters) on
   /// every body; CL_SS | CL_SELF as Bullet documents it, or with cluster_self_direct CL_SS and the
   /// cluster self-collision called directly (TimedSoftBodySolver::setCallClusterSelf).
@@ -99,6 +101,7 @@ struct RunResult {
   std::string exact = "bullet";   ///< exact test of the run (Bullet's own pipeline: always bullet)
   std::string motion_bound;       ///< ours: "ahead", "radius" or "swept" (continuous); empty for Bullet's
   bool runaway_fallback = false;  ///< ours: RunOptions::runaway_fallback
+  std::string contacts;           ///< ours: RunOptions::contacts; empty for Bullet's
   bool self_collision = false;    ///< the pipeline itself: ours with RunOptions::self_collision, Bullet's cluster runs
   int bullet_clusters = 0;        ///< RunOptions::bullet_clusters (0: not a cluster run)
   bool cluster_self_direct = false;
@@ -118,6 +121,7 @@ struct RunResult {
   double recall_strict_testable = 1.0;     ///< recall over the strict truth without those, found and true
   double scale = 1.0;                      ///< SceneParams::scale of the run
   std::size_t contacts_found_total = 0;
+  std::size_t reduced_contacts_total = 0;  ///< ours: StepCounts::reduced_contacts summed
   std::size_t contacts_outside_truth = 0;  ///< only with the full truth
   std::size_t truth_pairs_total = 0, truth_pairs_found = 0;
   double exact_tests_per_step = 0.0;

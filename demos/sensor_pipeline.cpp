@@ -23,21 +23,22 @@ bool SensorPipeline::available() { return true; }
 
 int SensorPipeline::bodyCollisionFlags() { return btSoftBody::fCollision::SDF_RS; }
 
-SensorPipeline::SensorPipeline(SceneWorld& world, psc::Flagging flagging, const std::string& exact,
-                               const std::string& motion_bound, bool self_collision, bool refit_after_predict,
-                               bool runaway_fallback) {
+SensorPipeline::SensorPipeline(SceneWorld& world, const Options& options) {
   psc::bullet::Settings settings;
   settings.opt_in = psc::bullet::OptIn::Explicit;
-  settings.sensors.flagging = flagging;
-  settings.self_collision = self_collision;
-  settings.runaway_fallback = runaway_fallback;
-  settings.exact = psc::bullet::exactTestFromString(exact);
-  if (motion_bound == "radius") settings.sensors.motion_bound = psc::MotionBound::Radius;
-  else if (motion_bound == "ahead") settings.sensors.motion_bound = psc::MotionBound::Ahead;
-  else throw psc::Error(psc::ErrorCode::InvalidArgument, "motion bound '" + motion_bound + "' is not one of radius, ahead");
+  settings.sensors.flagging = options.flagging;
+  settings.self_collision = options.self_collision;
+  settings.runaway_fallback = options.runaway_fallback;
+  settings.exact = psc::bullet::exactTestFromString(options.exact);
+  if (options.motion_bound == "radius") settings.sensors.motion_bound = psc::MotionBound::Radius;
+  else if (options.motion_bound == "ahead") settings.sensors.motion_bound = psc::MotionBound::Ahead;
+  else throw psc::Error(psc::ErrorCode::InvalidArgument, "motion bound '" + options.motion_bound + "' is not one of radius, ahead");
+  if (options.contacts == "all") settings.contacts = psc::bullet::ContactSet::AllPairs;
+  else if (options.contacts == "nearest") settings.contacts = psc::bullet::ContactSet::NearestFace;
+  else throw psc::Error(psc::ErrorCode::InvalidArgument, "contact set '" + options.contacts + "' is not one of all, nearest");
   impl_ = std::make_shared<Impl>(world, psc::bullet::install(world.world(), settings));
   for (btSoftBody* body : world.softBodies()) impl_->plugin.setEnabled(body, true);
-  if (refit_after_predict) {
+  if (options.refit_after_predict) {
     psc::bullet::Plugin* plugin = &impl_->plugin;  // Impl is not moved: the world holds it until its end
     world.softSolver().setAfterPredict([plugin](const btSoftBody& body) { plugin->afterPredictMotion(body); });
   }
@@ -60,6 +61,13 @@ void SensorPipeline::takeStep(StepRecord& record) {
   n.flagged_pairs = s.flagged_pairs;
   n.candidate_pairs = s.candidate_pairs;
   n.exact_tests = s.exact_tests;
+  n.reduced_contacts = s.reduced_contacts;
+  // The plugin's runaway rule counts what its exact test accepted, before a contact reduction:
+  // with --contacts nearest the contacts found stay under the rule while a runaway goes on.
+  if (s.runaway_pairs > n.runaway_pairs) {
+    n.runaway_pairs = s.runaway_pairs;
+    record.runaway = s.runaway;
+  }
   n.repartitions = s.repartitions;
   StepTimes& ms = record.ms;
   ms.sensor_step = s.ms_sensor_step;

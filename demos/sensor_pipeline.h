@@ -32,21 +32,30 @@ class SensorPipeline {
   /// m_cfg.collisions for bodies of the sensor world: soft-rigid as usual, no VF_SS.
   static int bodyCollisionFlags();
 
-  /// `flagging` goes to Settings::sensors.flagging: SensorsAndBounds (the default), Bounds (the
-  /// ablation: boxes only) or Sensors (the thesis's flag-only mode). `exact`: the plugin's exact
-  /// test, "bullet", "robust" or "continuous" (psc::bullet::ExactTest); anything else throws
-  /// psc::Error(InvalidArgument). `motion_bound`: Settings::sensors.motion_bound, "radius" (the
-  /// default, MotionBound::Radius) or "ahead" (MotionBound::Ahead); exact = "continuous"
-  /// uses MotionBound::Swept whatever it says. `self_collision`: Settings::self_collision, every body against
-  /// itself too (its rest shape: its positions at the plugin's first step). `refit_after_predict`:
-  /// the world's solver calls Plugin::afterPredictMotion after each body's predictMotion (what
-  /// psc::bullet::SoftBodySolver does), so the sensors refit each body while its nodes are warm;
-  /// false: every body is refit in the sensor step, at the first soft-soft pair.
-  /// `runaway_fallback`: Settings::runaway_fallback.
-  explicit SensorPipeline(SceneWorld& world, psc::Flagging flagging = psc::Flagging::SensorsAndBounds,
-                          const std::string& exact = "bullet", const std::string& motion_bound = "radius",
-                          bool self_collision = false,
-                          bool refit_after_predict = true, bool runaway_fallback = false);
+  /// What our pipeline runs with; each member goes to psc::bullet::Settings.
+  struct Options {
+    /// Settings::sensors.flagging: SensorsAndBounds (the default), Bounds (the ablation: boxes
+    /// only) or Sensors (the thesis's flag-only mode).
+    psc::Flagging flagging = psc::Flagging::SensorsAndBounds;
+    /// The exact test, "bullet", "robust" or "continuous" (psc::bullet::ExactTest).
+    std::string exact = "bullet";
+    /// Settings::sensors.motion_bound, "radius" (MotionBound::Radius) or "ahead" (MotionBound::Ahead);
+    /// exact = "continuous" uses MotionBound::Swept whatever it says.
+    std::string motion_bound = "radius";
+    /// Settings::contacts, "all" (ContactSet::AllPairs) or "nearest" (ContactSet::NearestFace).
+    std::string contacts = "all";
+    /// Settings::self_collision: every body against itself too (its rest shape: its positions at
+    /// the plugin's first step).
+    bool self_collision = false;
+    /// The world's solver calls Plugin::afterPredictMotion after each body's predictMotion (what
+    /// psc::bullet::SoftBodySolver does), so the sensors refit each body while its nodes are warm;
+    /// false: every body is refit in the sensor step, at the first soft-soft pair.
+    bool refit_after_predict = true;
+    bool runaway_fallback = false;  ///< Settings::runaway_fallback
+  };
+  /// Installs the plugin on `world`'s soft bodies. A text option that names no choice throws
+  /// psc::Error(InvalidArgument).
+  SensorPipeline(SceneWorld& world, const Options& options);
   ~SensorPipeline();
 
   /// Adds the plugin's figures of the step that just ended to `record` (times and counts stay 0

@@ -47,6 +47,9 @@ struct StepTimes {
 struct StepCounts {
   std::size_t contacts_found = 0;  ///< distinct soft-soft (node, face) contacts Bullet's solver sees
   std::size_t exact_tests = 0;     ///< CollideVF_SS tests (Bullet: counted by the probe; ours: the plugin's)
+  /// Ours with --contacts nearest: contacts the exact test accepted and the reduction left out
+  /// (psc::bullet::Stats::reduced_contacts), not in contacts_found.
+  std::size_t reduced_contacts = 0;
   // Our pipelines, from psc::bullet::Stats.
   bool sensed = false;             ///< the plugin ran its sensor step this step
   std::size_t particles = 0, flagged_pairs = 0, candidate_pairs = 0, round_cap_hits = 0, repartitions = 0;

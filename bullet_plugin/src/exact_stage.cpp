@@ -245,6 +245,14 @@ const char* toString(ExactTest test) {
   return "?";
 }
 
+const char* toString(ContactSet set) {
+  switch (set) {
+    case ContactSet::AllPairs: return "all";
+    case ContactSet::NearestFace: return "nearest";
+  }
+  return "?";
+}
+
 ExactTest exactTestFromString(const std::string& text) {
   for (ExactTest t : {ExactTest::Bullet, ExactTest::Robust, ExactTest::Continuous})
     if (text == toString(t)) return t;
@@ -264,9 +272,54 @@ ContactKind exactContact(ExactTest test, const btSoftBody& node_body, const btSo
 }
 
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body,
-                              const psc::CandidatePair* first, const psc::CandidatePair* last) {
-  return collideCandidates(test, node_body, face_body, marginSum(node_body, face_body), first, last);
+                              const psc::CandidatePair* first, const psc::CandidatePair* last, ContactSet contacts) {
+  return collideCandidates(test, node_body, face_body, marginSum(node_body, face_body), first, last, contacts);
 }
+
+namespace {
+
+/// ContactSet::NearestFace on node_body.m_scontacts[from, end): of each node's contacts there, the
+/// discrete contact nearest to the node (the first of equals) and every crossing contact
+/// (`is_crossing`, parallel to the range; null: none) stay, in order. A node's contacts need not be
+/// consecutive (the core's candidates come by region and chunk pair). Returns how many went.
+std::size_t keepNearestFace(btSoftBody& node_body, int from, const std::vector<char>* is_crossing) {
+  btAlignedObjectArray<btSoftBody::SContact>& list = node_body.m_scontacts;
+  const int end = list.size();
+  if (end - from < 2) return 0;
+  const auto crossing = [&](int i) { return is_crossing != nullptr && (*is_crossing)[static_cast<std::size_t>(i - from)]; };
+  const auto distance2 = [](const btSoftBody::SContact& c) {
+    const btSoftBody::Face& f = *c.m_face;
+    const btVector3 p = f.m_n[0]->m_x * c.m_weights.x() + f.m_n[1]->m_x * c.m_weights.y() + f.m_n[2]->m_x * c.m_weights.z();
+    return (c.m_node->m_x - p).length2();
+  };
+  // Per node of the body, the index of its nearest discrete contact so far (-1: none yet).
+  thread_local std::vector<int> nearest;
+  thread_local std::vector<btScalar> least;
+  const btSoftBody::Node* nodes = &node_body.m_nodes[0];
+  const auto nodeOf = [&](int i) { return static_cast<std::size_t>(list[i].m_node - nodes); };
+  const auto count = static_cast<std::size_t>(node_body.m_nodes.size());
+  if (nearest.size() < count) {
+    nearest.resize(count, -1);
+    least.resize(count);
+  }
+  for (int i = from; i < end; ++i) {
+    if (crossing(i)) continue;
+    const std::size_t n = nodeOf(i);
+    const btScalar d = distance2(list[i]);
+    if (nearest[n] < 0 || d < least[n]) {
+      nearest[n] = i;
+      least[n] = d;
+    }
+  }
+  int out = from;
+  for (int i = from; i < end; ++i)
+    if (crossing(i) || nearest[nodeOf(i)] == i) list[out++] = list[i];
+  for (int i = from; i < out; ++i) nearest[nodeOf(i)] = -1;  // every node touched kept a contact
+  list.resize(out);
+  return static_cast<std::size_t>(end - out);
+}
+
+}  // namespace
 
 #if !defined(BT_USE_DOUBLE_PRECISION)
 namespace {
@@ -364,7 +417,7 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
 #endif
 
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body, btScalar radius,
-                              const psc::CandidatePair* first, const psc::CandidatePair* last) {
+                              const psc::CandidatePair* first, const psc::CandidatePair* last, ContactSet contacts) {
   ExactCounts counts;
   if (first == last) return counts;
   const int before = node_body.m_scontacts.size();
@@ -403,6 +456,7 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
       face_leaf.data = &face_body.m_faces[static_cast<int>(c->triangle)];
       collide.Process(&node_leaf, &face_leaf);
     }
+    if (contacts == ContactSet::NearestFace) counts.reduced = keepNearestFace(node_body, before, nullptr);
     counts.contacts = static_cast<std::size_t>(node_body.m_scontacts.size() - before);
     return counts;
   }
@@ -462,11 +516,17 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
         sc.m_normal = toBt(n);
         ++counts.turned;
       }
-      if (out != i) node_body.m_scontacts[out] = sc;
+      if (out != i) {
+        node_body.m_scontacts[out] = sc;
+        is_crossing[static_cast<std::size_t>(out - before)] = is_crossing[static_cast<std::size_t>(i - before)];
+      }
       ++out;
     }
     node_body.m_scontacts.resize(out);
+    is_crossing.resize(static_cast<std::size_t>(out - before));
   }
+  if (contacts == ContactSet::NearestFace)
+    counts.reduced = keepNearestFace(node_body, before, test == ExactTest::Continuous ? &is_crossing : nullptr);
   counts.contacts = static_cast<std::size_t>(node_body.m_scontacts.size() - before);
   return counts;
 }

@@ -173,12 +173,13 @@ void Installation::collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, p
   const auto start = std::chrono::steady_clock::now();
   const std::vector<psc::CandidatePair>& candidates = sensors_.lastResult().candidates;
   const auto ab = candidatesOf(candidates, id_a, id_b);
-  const ExactCounts ab_counts = collideCandidates(settings_.exact, a, b, ab.first, ab.second);
+  const ExactCounts ab_counts = collideCandidates(settings_.exact, a, b, ab.first, ab.second, settings_.contacts);
   const auto ba = candidatesOf(candidates, id_b, id_a);
-  const ExactCounts ba_counts = collideCandidates(settings_.exact, b, a, ba.first, ba.second);
+  const ExactCounts ba_counts = collideCandidates(settings_.exact, b, a, ba.first, ba.second, settings_.contacts);
   addCounts(ab_counts);
   addCounts(ba_counts);
-  const std::size_t contacts = ab_counts.contacts + ba_counts.contacts;
+  // The rule counts what the exact test accepted, before ContactSet::NearestFace kept the nearest.
+  const std::size_t contacts = ab_counts.contacts + ab_counts.reduced + ba_counts.contacts + ba_counts.reduced;
   const bool runaway = isRunaway(a, b, contacts);
   if (runaway && settings_.runaway_fallback && settings_.exact != ExactTest::Continuous &&
       settings_.sensors.motion_bound == psc::MotionBound::Radius && !sensors_.pairAhead(id_a, id_b)) {
@@ -268,6 +269,7 @@ void Installation::addCounts(const ExactCounts& counts) {
   stats_.contacts += counts.contacts;
   stats_.robust_contacts += counts.robust;
   stats_.crossing_contacts += counts.crossings;
+  stats_.reduced_contacts += counts.reduced;
 }
 
 void Installation::syncSelfCollision() {
@@ -289,7 +291,8 @@ void Installation::collideSelfPairs() {
     if (body == nullptr || range.first == range.second) continue;
     const auto start = std::chrono::steady_clock::now();
     const auto radius = static_cast<btScalar>(sensors_.selfRadius(id));
-    const ExactCounts counts = collideCandidates(settings_.exact, *body, *body, radius, range.first, range.second);
+    const ExactCounts counts =
+        collideCandidates(settings_.exact, *body, *body, radius, range.first, range.second, settings_.contacts);
     addCounts(counts);
     stats_.self_exact_tests += counts.tests;
     stats_.self_contacts += counts.contacts;

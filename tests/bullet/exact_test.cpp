@@ -13,6 +13,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
+#include <map>
 #include <random>
 #include <set>
 #include <utility>
@@ -631,6 +633,160 @@ TEST(ExactTests, ContinuousTurnsTheDiscreteContactsOfACrossingNodeToItsSide) {
 }
 
 // --- the plugin ---------------------------------------------------------------------------------
+
+/// A jittered sheet of faces (spacing 0.05, margins 0.025 + 0.025) and nodes of another body over
+/// and under it, each within the contact radius of a dozen faces or more; a third of the nodes
+/// pass through the sheet during the step (m_q on one side, m_x on the other). The candidates are
+/// every (node, face) pair, by face: the rig of ContactSet::NearestFace.
+struct SheetRig {
+  static constexpr int kSide = 16, kNodes = 300;
+  btSoftBodyWorldInfo info;
+  btSoftBody node_body;
+  btSoftBody face_body;
+  std::vector<psc::CandidatePair> candidates;
+
+  static std::vector<btVector3> grid() {
+    std::mt19937_64 rng(99);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    std::vector<btVector3> x;
+    for (int i = 0; i < kSide; ++i)
+      for (int k = 0; k < kSide; ++k)
+        x.emplace_back(btScalar(0.05 * i), btScalar(0.008 * u(rng)), btScalar(0.05 * k));
+    return x;
+  }
+  SheetRig() : node_body(&info, kNodes, BatchRig::spread(kNodes).data(), nullptr),
+               face_body(&info, kSide * kSide, grid().data(), nullptr) {
+    for (int i = 0; i + 1 < kSide; ++i)
+      for (int k = 0; k + 1 < kSide; ++k) {
+        const int a = i * kSide + k;
+        face_body.appendFace(a, a + kSide, a + 1);
+        face_body.appendFace(a + 1, a + kSide, a + kSide + 1);
+      }
+    for (int i = 0; i < face_body.m_nodes.size(); ++i) face_body.m_nodes[i].m_q = face_body.m_nodes[i].m_x;
+    node_body.getCollisionShape()->setMargin(btScalar(0.025));
+    face_body.getCollisionShape()->setMargin(btScalar(0.025));
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    for (int n = 0; n < kNodes; ++n) {
+      btSoftBody::Node& node = node_body.m_nodes[n];
+      const double x = 0.1 + 0.55 * u(rng), z = 0.1 + 0.55 * u(rng);
+      if (n % 3 == 0) {  // through the sheet during the step
+        node.m_q = btVector3(btScalar(x), btScalar(0.03 + 0.02 * u(rng)), btScalar(z));
+        node.m_x = btVector3(btScalar(x + 0.01 * u(rng)), btScalar(-0.02 - 0.02 * u(rng)), btScalar(z));
+      } else {
+        node.m_x = btVector3(btScalar(x), btScalar(0.07 * (u(rng) - 0.3)), btScalar(z));
+        node.m_q = node.m_x - btVector3(btScalar(0.004 * u(rng)), btScalar(0.004 * u(rng)), 0);
+      }
+      node.m_im = btScalar(1);
+    }
+    // Face by face: a node's candidates are not consecutive (nor are the core's, which come by
+    // region and chunk pair).
+    for (int f = 0; f < face_body.m_faces.size(); ++f)
+      for (int n = 0; n < kNodes; ++n) candidates.push_back({0, psc::Index(n), 1, psc::Index(f)});
+  }
+  std::vector<btSoftBody::SContact> run(ExactTest test, psc::bullet::ContactSet set, psc::bullet::ExactCounts& counts) {
+    node_body.m_scontacts.resize(0);
+    counts = psc::bullet::collideCandidates(test, node_body, face_body, candidates.data(),
+                                            candidates.data() + candidates.size(), set);
+    std::vector<btSoftBody::SContact> out(std::size_t(node_body.m_scontacts.size()));
+    for (int i = 0; i < node_body.m_scontacts.size(); ++i) out[std::size_t(i)] = node_body.m_scontacts[i];
+    return out;
+  }
+};
+
+/// The distance from a contact's node to its face point, in double (the reference for "nearest").
+double contactDistance(const btSoftBody::SContact& c) {
+  const btSoftBody::Face& f = *c.m_face;
+  const Vec3 p = toVec(f.m_n[0]->m_x) * double(c.m_weights.x()) + toVec(f.m_n[1]->m_x) * double(c.m_weights.y()) +
+                 toVec(f.m_n[2]->m_x) * double(c.m_weights.z());
+  return (toVec(c.m_node->m_x) - p).norm();
+}
+
+TEST(ExactTests, NearestFaceKeepsEachNodesNearestContactOfAllThoseAccepted) {
+  // ContactSet::NearestFace against AllPairs on the same candidates: every node that got a contact
+  // keeps exactly one discrete contact (plus, with Continuous, all its crossing contacts), it is
+  // one of the node's AllPairs contacts bit for bit and the nearest of them (up to the float
+  // rounding the reduction decides in), the kept contacts come in the same order, and
+  // ExactCounts::reduced counts the rest.
+  using psc::bullet::ContactSet;
+  SheetRig rig;
+  for (ExactTest test : {ExactTest::Bullet, ExactTest::Robust, ExactTest::Continuous}) {
+    psc::bullet::ExactCounts all_counts, near_counts;
+    const auto all = rig.run(test, ContactSet::AllPairs, all_counts);
+    const auto near = rig.run(test, ContactSet::NearestFace, near_counts);
+    const char* name = psc::bullet::toString(test);
+    EXPECT_EQ(all_counts.reduced, 0u) << name;
+    EXPECT_EQ(near_counts.reduced, all.size() - near.size()) << name;
+    EXPECT_EQ(near_counts.crossings, all_counts.crossings) << name;
+    EXPECT_EQ(near_counts.tests, all_counts.tests) << name;
+    std::map<const btSoftBody::Node*, std::vector<std::size_t>> all_of, near_of;
+    for (std::size_t i = 0; i < all.size(); ++i) all_of[all[i].m_node].push_back(i);
+    for (std::size_t i = 0; i < near.size(); ++i) near_of[near[i].m_node].push_back(i);
+    ASSERT_EQ(all_of.size(), near_of.size()) << name << ": no node may lose all its contacts";
+    ASSERT_GT(all.size(), 4 * all_of.size()) << name << ": the rig must give nodes several contacts";
+    // Kept contacts, in order: a subsequence of AllPairs' (bit for bit).
+    std::size_t at = 0;
+    for (const btSoftBody::SContact& c : near) {
+      while (at < all.size() && !psc_test::sameContact(all[at], c)) ++at;
+      ASSERT_LT(at, all.size()) << name << ": a kept contact is not one of AllPairs' in order";
+      ++at;
+    }
+    for (const auto& [node, kept] : near_of) {
+      const std::vector<std::size_t>& accepted = all_of[node];
+      if (test != ExactTest::Continuous) {
+        ASSERT_EQ(kept.size(), 1u) << name;
+        double least = std::numeric_limits<double>::infinity();
+        for (std::size_t i : accepted) least = std::min(least, contactDistance(all[i]));
+        EXPECT_LE(contactDistance(near[kept[0]]), least * (1.0 + 1e-5) + 1e-7) << name << ": not the nearest";
+      } else {
+        EXPECT_GE(kept.size(), 1u);
+        EXPECT_LE(kept.size(), accepted.size());
+      }
+    }
+    if (test == ExactTest::Continuous) {
+      EXPECT_GT(all_counts.crossings, 20u);
+      // Every node keeps its crossings and at most one discrete contact.
+      EXPECT_LE(near.size(), near_counts.crossings + near_of.size());
+      EXPECT_GE(near.size(), near_of.size());
+    }
+    std::printf("nearest face, exact=%s: %zu nodes with contacts, %zu contacts of all pairs, %zu kept, %zu reduced, "
+                "%zu crossings\n", name, all_of.size(), all.size(), near.size(), near_counts.reduced, near_counts.crossings);
+  }
+}
+
+TEST(ExactTests, NearestFaceIsValidatedAndNamedInThePlugin) {
+  // The plugin hands the setting to its exact stage (Stats::reduced_contacts) and still applies the
+  // runaway rule to what the exact test accepted.
+  EXPECT_STREQ(psc::bullet::toString(psc::bullet::ContactSet::AllPairs), "all");
+  EXPECT_STREQ(psc::bullet::toString(psc::bullet::ContactSet::NearestFace), "nearest");
+  for (psc::bullet::ContactSet set : {psc::bullet::ContactSet::AllPairs, psc::bullet::ContactSet::NearestFace}) {
+    psc_test::SoftWorld w(0);
+    psc_test::SoftParams p;
+    p.margin = 0.05;
+    w.addSoft(psc::makeSphere(0.5, 800).translate({-0.52, 0, 0}), p, {btScalar(1.0), 0, 0});
+    w.addSoft(psc::makeSphere(0.5, 800).translate({0.52, 0.05, 0}), p, {btScalar(-1.0), 0, 0});
+    psc::bullet::Settings settings;
+    settings.contacts = set;
+    auto plugin = psc::bullet::install(w.world, settings);
+    std::size_t contacts = 0, reduced = 0, duplicates = 0;
+    w.run(20, [&] {
+      contacts += plugin.stats().contacts;
+      reduced += plugin.stats().reduced_contacts;
+      for (btSoftBody* body : {w.world.getSoftBodyArray()[0], w.world.getSoftBodyArray()[1]}) {
+        std::set<const void*> nodes;
+        for (int i = 0; i < body->m_scontacts.size(); ++i) duplicates += !nodes.insert(body->m_scontacts[i].m_node).second;
+      }
+    });
+    EXPECT_GT(contacts, 100u) << psc::bullet::toString(set);
+    if (set == psc::bullet::ContactSet::AllPairs) {
+      EXPECT_EQ(reduced, 0u);
+      EXPECT_GT(duplicates, 0u) << "a resting node is within the radius of several faces";
+    } else {
+      EXPECT_GT(reduced, contacts) << "most accepted contacts are beside the nearest";
+      EXPECT_EQ(duplicates, 0u) << "one contact per node and body it touches";
+    }
+  }
+}
 
 TEST(ExactTests, SettingsExactIsValidatedAndNamed) {
   psc_test::SoftWorld w(0);

@@ -47,6 +47,7 @@ struct ExactCounts {
   std::size_t crossings = 0;  ///< of them: ContactKind::Crossing
   std::size_t turned = 0;     ///< Continuous: discrete contacts of nodes that crossed a face of the same body, given the face's normal
   std::size_t dropped = 0;    ///< Continuous: such contacts on degenerate faces (no normal), removed
+  std::size_t reduced = 0;    ///< ContactSet::NearestFace: accepted contacts removed (not their node's nearest)
 };
 
 /// The plugin's exact stage for one direction of one body pair: runs `test` on each candidate
@@ -60,14 +61,19 @@ struct ExactCounts {
 /// further through; kept, they hold it in front of the faces next to the crossed one, which the
 /// solver otherwise moves it through where the surface is folded. Contacts on degenerate faces
 /// (no normal) are dropped.
+/// With ContactSet::NearestFace, of each node's contacts of this call only the discrete one
+/// nearest to the node (|m_x − the face point at the contact's weights|, in btScalar; the first of
+/// equals) and its crossing contacts stay, in candidate order; ExactCounts::reduced counts the rest.
 /// The candidates' indices must be valid for the bodies' m_nodes / m_faces.
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body,
-                              const psc::CandidatePair* first, const psc::CandidatePair* last);
+                              const psc::CandidatePair* first, const psc::CandidatePair* last,
+                              ContactSet contacts = ContactSet::AllPairs);
 /// The same at a given contact radius (what takes the place of the two margins' sum, the motion
 /// term still added): a body against itself at its self contact radius
 /// (psc::SensorWorld::selfRadius) rather than at twice its margin. Contacts carry it as m_margin.
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body, btScalar radius,
-                              const psc::CandidatePair* first, const psc::CandidatePair* last);
+                              const psc::CandidatePair* first, const psc::CandidatePair* last,
+                              ContactSet contacts = ContactSet::AllPairs);
 
 // --- the geometry, in double -------------------------------------------------------------------
 

@@ -43,6 +43,24 @@ enum class ExactTest {
   Continuous,
 };
 
+/// Which of the exact test's contacts go to Bullet's solver.
+enum class ContactSet {
+  /// Every pair the exact test accepts, as Bullet's own path makes them: a node within the contact
+  /// radius of k faces of one body gets k contacts. On fine meshes k grows as (radius / edge)²
+  /// (about 50 per resting node on 8,000-vertex tori with 0.05 margins), and each pushes the node.
+  AllPairs,
+  /// [beyond] Per node and body it touches (its own body with self-collision), the accepted
+  /// discrete contact nearest to the node (the first of equals, in face order); Continuous's
+  /// crossing contacts are all kept. No node that got a contact against a body loses it; the
+  /// contacts beside it, which push the same node out of the neighbouring faces' planes, go
+  /// (Stats::reduced_contacts counts them). Bullet's response on them feeds a runaway in a dense
+  /// fine pile (README, "Not done"); with this set it did not run away.
+  NearestFace,
+};
+
+/// "all", "nearest".
+const char* toString(ContactSet set);
+
 struct Settings {
   /// The core's settings (μ, R_eff, rounds, flagging, partitioning, motion bound). `sensors.motion_factor`
   /// = 2 matches the motion term of Bullet's CollideVF_SS acceptance radius; less lets the
@@ -74,6 +92,9 @@ struct Settings {
   /// node's segment (m_q → m_x) meets the face's swept volume (exact.h, firstCrossing): with it the
   /// plugin sets `sensors.motion_bound` to MotionBound::Swept whatever it says here.
   ExactTest exact = ExactTest::Bullet;
+  /// Which of its contacts reach the solver: all (Bullet's model, the default) or the nearest face
+  /// per node and body.
+  ContactSet contacts = ContactSet::AllPairs;
   /// [beyond] Self-collision (a body's nodes against its own faces, through the sensor regions)
   /// for every participating body; Plugin::setSelfCollision overrides it per body. Off keeps
   /// Bullet's behaviour: btSoftRigidDynamicsWorld has no vertex-face self-collision.
