@@ -764,6 +764,8 @@ struct PairContext {
   /// MotionBound::Ahead (two-body pairs): the probes test the paths `ahead_steps` ahead, the exact
   /// distance the radius. 0: not Ahead.
   double ahead_steps = 0.0;
+  /// SensorSettings::nearest_candidates: each candidate's squared distance, parallel to `out`.
+  std::vector<double>* out_d2 = nullptr;
 };
 
 /// Self-collision's exclusion rule: the triangle holds the vertex, or the two were within the
@@ -1064,10 +1066,15 @@ void keepWithinReach(const PairContext& ctx, const VertexRec* recs) {
   const std::size_t first = ctx.out.size();
   ctx.out.resize(first + n);
   std::uint64_t* out = ctx.out.data() + first;
+  // With nearest_candidates each kept pair's distance goes beside it, the same way.
+  std::vector<double>* dist = ctx.out_d2;
+  if (dist != nullptr) dist->resize(first + n);
+  double* out_d2 = dist != nullptr ? dist->data() + first : nullptr;
   std::size_t kept = 0;
   const auto decide = [&](std::size_t at, double d2) {
     const VertexRec& vr = recs[s.pending[at].first];
     out[kept] = (std::uint64_t{vr.v} << 32) | s.corners[s.pending[at].second].t;
+    if (out_d2 != nullptr) out_d2[kept] = d2;
     kept += static_cast<std::size_t>(d2 < vr.reach2);
   };
 #if defined(PSC_HAVE_AVX2_PATH)
@@ -1093,6 +1100,7 @@ void keepWithinReach(const PairContext& ctx, const VertexRec* recs) {
     decide(i, FilterDistance::of(recs[s.pending[i].first].x, tc.a, tc.b, tc.c));
   }
   ctx.out.resize(first + kept);
+  if (dist != nullptr) dist->resize(first + kept);
   ctx.counters.candidates_beyond_reach += n - kept;
   s.pending.clear();
 }
@@ -1365,6 +1373,27 @@ bool restApartRegions(const Body& X, Index i, Index j, double exclusion, double 
 struct Group {
   BodyId vb, tb;
   std::vector<std::uint64_t> keys;
+  std::vector<double> d2;  ///< CullParams::nearest: each key's squared distance
+
+  /// CullParams::nearest: keeps, in order, the keys within a relative 1e-4 of their vertex's least
+  /// distance (2.1e-4 on the squares); `least` is a table by vertex id of at least `vertices`
+  /// entries, +infinity on entry and on return. Returns how many went.
+  std::size_t keepNearest(std::size_t vertices, std::vector<double>& least) {
+    if (least.size() < vertices) least.resize(vertices, std::numeric_limits<double>::infinity());
+    for (std::size_t i = 0; i < keys.size(); ++i) {
+      double& l = least[keys[i] >> 32];
+      l = std::min(l, d2[i]);
+    }
+    std::size_t out = 0;
+    for (std::size_t i = 0; i < keys.size(); ++i)
+      if (d2[i] <= least[keys[i] >> 32] * (1.0 + 2.1e-4)) keys[out++] = keys[i];
+    // Each vertex met keeps its nearest key, so the kept keys reach every entry set above.
+    for (std::size_t i = 0; i < out; ++i) least[keys[i] >> 32] = std::numeric_limits<double>::infinity();
+    const std::size_t gone = keys.size() - out;
+    keys.resize(out);
+    d2.clear();
+    return gone;
+  }
 };
 
 class Collector {
@@ -1393,13 +1422,17 @@ class Collector {
     regionItems(A, boxB, s_.items_a);
     if (s_.items_a.empty()) return;
     regionItems(B, boxA, s_.items_b);
-    Group ab{A.id, B.id, {}}, ba{B.id, A.id, {}};
+    Group ab{A.id, B.id, {}, {}}, ba{B.id, A.id, {}, {}};
     region_pairs_.clear();
     sweepBetween(s_.items_a, s_.items_b, [&](Index ri, Index rj) { region_pairs_.emplace_back(ri, rj); });
     // Bullet's contact solver is Gauss-Seidel: contacts in mesh order (not in sweep order) keep
     // its result independent of the sweep axis and measured better on resting stacks.
     std::sort(region_pairs_.begin(), region_pairs_.end());
-    for (const auto& [ri, rj] : region_pairs_) regionPair(A, ri, B, rj, ab.keys, ba.keys, ahead_steps);
+    for (const auto& [ri, rj] : region_pairs_) regionPair(A, ri, B, rj, ab, ba, ahead_steps);
+    if (params_.nearest) {
+      counters_.candidates_not_nearest += ab.keepNearest(A.chunks.chunk_of.size(), least_);
+      counters_.candidates_not_nearest += ba.keepNearest(B.chunks.chunk_of.size(), least_);
+    }
     if (!ab.keys.empty()) groups.push_back(std::move(ab));
     if (!ba.keys.empty()) groups.push_back(std::move(ba));
   }
@@ -1446,10 +1479,10 @@ class Collector {
     });
     std::sort(region_pairs_.begin(), region_pairs_.end());
     const double exclude = params_.self_rest_exclusion * radius;
-    Group g{X.id, X.id, {}};
+    Group g{X.id, X.id, {}, {}};
     const Axis no_axis;
     const PairContext ctx{X,         X,  radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude,
-                          self_motion ? &fit.mean_motion : nullptr};
+                          self_motion ? &fit.mean_motion : nullptr, 0.0, params_.nearest ? &g.d2 : nullptr};
     const auto t0 = std::chrono::steady_clock::now();
     // The rest-shape bound needs the radius bound's reach (a swept pair may meet during the step).
     const bool rest_bound = params_.self_rest_bound && self_motion;
@@ -1508,6 +1541,7 @@ class Collector {
         if (&ca != &cb) collect(cb, ca);
       }
     }
+    if (params_.nearest) counters_.candidates_not_nearest += g.keepNearest(X.chunks.chunk_of.size(), least_);
     counters_.ms_candidates += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     if (!g.keys.empty()) {
       std::sort(g.keys.begin(), g.keys.end());
@@ -1516,9 +1550,9 @@ class Collector {
   }
 
  private:
+  std::vector<double> least_;  ///< Group::keepNearest's table by vertex id (+infinity between uses)
   /// `ahead_steps`: the body pair's PairContext::ahead_steps (0: not on the Ahead bound).
-  void regionPair(const Body& A, Index ri, const Body& B, Index rj, std::vector<std::uint64_t>& ab_keys,
-                  std::vector<std::uint64_t>& ba_keys, double ahead_steps) {
+  void regionPair(const Body& A, Index ri, const Body& B, Index rj, Group& ab, Group& ba, double ahead_steps) {
     const double mf = params_.motion_factor;
     const Grown boxI = grown(A.region_box[ri], A.margin, mf);
     const Grown boxJ = grown(B.region_box[rj], B.margin, mf);
@@ -1554,10 +1588,10 @@ class Collector {
     flagged_.push_back(f);
 
     const auto t0 = std::chrono::steady_clock::now();
-    const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab_keys, counters_, s_,
-                           -1.0, nullptr, ahead_steps};
-    const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba_keys, counters_, s_,
-                           -1.0, nullptr, ahead_steps};
+    const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab.keys, counters_, s_,
+                           -1.0, nullptr, ahead_steps, params_.nearest ? &ab.d2 : nullptr};
+    const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba.keys, counters_, s_,
+                           -1.0, nullptr, ahead_steps, params_.nearest ? &ba.d2 : nullptr};
     const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
     s_.items_a.clear();
     s_.items_b.clear();

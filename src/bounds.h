@@ -40,6 +40,7 @@ struct CullParams {
   double self_rest_exclusion = 2.0;  ///< SensorSettings::self_rest_exclusion
   double self_radius_edges = 1.0;    ///< SensorSettings::self_radius_edges
   bool self_rest_bound = true;       ///< SensorSettings::self_rest_bound
+  bool nearest = false;              ///< SensorSettings::nearest_candidates (not with `swept`)
 };
 
 /// The pairs (i < j) of `bodies` whose grown body boxes overlap, by sort-and-sweep, sorted.

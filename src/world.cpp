@@ -531,6 +531,7 @@ const StepResult& SensorWorld::step() {
   params.self_rest_exclusion = w.settings.self_rest_exclusion;
   params.self_radius_edges = w.settings.self_radius_edges;
   params.self_rest_bound = w.settings.self_rest_bound;
+  params.nearest = w.settings.nearest_candidates && !params.swept;
   // [beyond] In the default mode a particle only serves the sensor decision of its region's pairs,
   // which exist only where the region's box reaches another body's: the other particles stay put
   // (and still pull).

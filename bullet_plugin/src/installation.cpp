@@ -68,9 +68,14 @@ std::pair<const psc::CandidatePair*, const psc::CandidatePair*> candidatesOf(
 }
 
 /// The core's settings for this plugin: Continuous's crossing test needs every pair that meets
-/// during the step (MotionBound::Swept), not Bullet's radius about the end positions.
+/// during the step (MotionBound::Swept), not Bullet's radius about the end positions. Robust with
+/// ContactSet::NearestFace needs only each node's nearest faces: Robust accepts every pair within
+/// the radius, so the nearest accepted contact is among them (SensorSettings::nearest_candidates).
+/// Bullet's test refuses small faces, where a farther face could give the node its contact: it
+/// gets every candidate.
 psc::SensorSettings coreSettings(const Settings& settings) {
   psc::SensorSettings core = settings.sensors;
+  if (settings.contacts == ContactSet::NearestFace && settings.exact == ExactTest::Robust) core.nearest_candidates = true;
   if (settings.exact == ExactTest::Continuous) {
     if (core.flagging == psc::Flagging::Sensors)
       throw psc::Error(psc::ErrorCode::InvalidSettings,

@@ -122,6 +122,15 @@ struct SensorSettings {
   std::size_t chunk_vertices = 32;
   /// Build (vertex, triangle) candidate pairs in step(); off = flagged pairs only.
   bool build_candidates = true;
+  /// [beyond] Of each vertex's candidates against one body (its own under self-collision), keep
+  /// only those whose distance (the candidate filter's exact point-triangle distance) is within a
+  /// relative 1e-4 of the vertex's least: its nearest triangle and near ties. For an exact test that
+  /// accepts every pair within the contact radius and a solver that keeps one contact per vertex
+  /// (psc::bullet's Robust test with ContactSet::NearestFace sets it): the exact stage then sees
+  /// about one pair per vertex instead of every triangle within the radius. StepStats counts the
+  /// rest (candidates_not_nearest). MotionBound::Swept has no such distance, and the thesis's
+  /// flag-only mode (Flagging::Sensors) no such filter: both ignore it.
+  bool nearest_candidates = false;
 
   PartitionSettings partition;
   DecompositionSettings decomposition;

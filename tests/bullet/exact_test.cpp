@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -786,6 +787,65 @@ TEST(ExactTests, NearestFaceIsValidatedAndNamedInThePlugin) {
       EXPECT_EQ(duplicates, 0u) << "one contact per node and body it touches";
     }
   }
+}
+
+TEST(ExactTests, NearestFaceWithRobustTestsOnlyEachNodesNearestCandidates) {
+  // With Robust, which accepts every pair within the radius, NearestFace lets the core hand over
+  // only each node's nearest candidates (SensorSettings::nearest_candidates); Bullet's test, which
+  // refuses small faces, gets them all. Where no face is small the two tests agree bit for bit, so
+  // the two runs must make the very same contacts, step for step, from far fewer tests.
+  const auto run = [](ExactTest exact, std::size_t& tests, std::size_t& not_nearest) {
+    psc_test::SoftWorld w(0);
+    psc_test::SoftParams p;
+    p.margin = 0.05;
+    w.addSoft(psc::makeSphere(0.5, 800).translate({-0.52, 0, 0}), p, {btScalar(1.0), 0, 0});
+    w.addSoft(psc::makeSphere(0.5, 800).translate({0.52, 0.05, 0}), p, {btScalar(-1.0), 0, 0});
+    psc::bullet::Settings settings;
+    settings.exact = exact;
+    settings.contacts = psc::bullet::ContactSet::NearestFace;
+    auto plugin = psc::bullet::install(w.world, settings);
+    // Per step, each contact with its node and face as indices (the bodies differ between runs).
+    std::vector<std::vector<std::pair<std::array<long, 2>, btSoftBody::SContact>>> contacts;
+    tests = not_nearest = 0;
+    w.run(20, [&] {
+      tests += plugin.stats().exact_tests;
+      not_nearest += plugin.stats().core.candidates_not_nearest;
+      std::vector<std::pair<std::array<long, 2>, btSoftBody::SContact>> step;
+      for (int k = 0; k < 2; ++k) {
+        btSoftBody* body = w.world.getSoftBodyArray()[k];
+        btSoftBody* other = w.world.getSoftBodyArray()[1 - k];
+        for (int i = 0; i < body->m_scontacts.size(); ++i) {
+          btSoftBody::SContact c = body->m_scontacts[i];
+          const std::array<long, 2> at{long(c.m_node - &body->m_nodes[0]), long(c.m_face - &other->m_faces[0])};
+          c.m_node = nullptr;
+          c.m_face = nullptr;
+          step.emplace_back(at, c);
+        }
+      }
+      contacts.push_back(step);
+    });
+    return contacts;
+  };
+  std::size_t bullet_tests = 0, robust_tests = 0, bullet_not_nearest = 0, robust_not_nearest = 0;
+  const auto bullet = run(ExactTest::Bullet, bullet_tests, bullet_not_nearest);
+  const auto robust = run(ExactTest::Robust, robust_tests, robust_not_nearest);
+  ASSERT_EQ(bullet.size(), robust.size());
+  std::size_t total = 0;
+  for (std::size_t s = 0; s < bullet.size(); ++s) {
+    ASSERT_EQ(bullet[s].size(), robust[s].size()) << "step " << s;
+    for (std::size_t i = 0; i < bullet[s].size(); ++i) {
+      ASSERT_EQ(bullet[s][i].first, robust[s][i].first) << "step " << s << ", contact " << i;
+      ASSERT_TRUE(psc_test::sameContact(bullet[s][i].second, robust[s][i].second)) << "step " << s << ", contact " << i;
+    }
+    total += bullet[s].size();
+  }
+  std::printf("nearest face: %zu contacts in both; exact tests %zu with Bullet's test, %zu with Robust (%zu candidates "
+              "left out by the core)\n", total, bullet_tests, robust_tests, robust_not_nearest);
+  EXPECT_GT(total, 100u);
+  EXPECT_EQ(bullet_not_nearest, 0u);
+  EXPECT_GT(robust_not_nearest, 0u);
+  EXPECT_LT(3 * robust_tests, bullet_tests);
+  EXPECT_EQ(robust_tests + robust_not_nearest, bullet_tests);
 }
 
 TEST(ExactTests, SettingsExactIsValidatedAndNamed) {

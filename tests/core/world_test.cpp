@@ -22,6 +22,8 @@
 #include <functional>
 #include <iostream>
 #include <limits>
+#include <map>
+#include <memory>
 #include <random>
 #include <set>
 
@@ -612,6 +614,69 @@ TEST(Probes, Avx2AndSse2GiveTheSameCandidates) {
       EXPECT_GT(wide_dropped, 0u) << "the slab must drop vertices here";
     }
     EXPECT_TRUE(wide == narrow);
+  }
+}
+
+// SensorSettings::nearest_candidates keeps, of each vertex's candidates against one body, exactly
+// those within a relative 1e-4 of its nearest by the filter's distance (2.1e-4 on the squares), in
+// the order of the full set, and counts the rest: three bodies pressed into each other over a few
+// steps, with and without the sensor stage.
+TEST(Candidates, NearestCandidatesKeepEachVertexsNearestTriangles) {
+  for (Flagging flagging : {Flagging::SensorsAndBounds, Flagging::Bounds}) {
+    const auto run = [&](bool nearest) {
+      SensorSettings settings;
+      settings.flagging = flagging;
+      settings.nearest_candidates = nearest;
+      auto sc = std::make_unique<Scene>(settings);
+      TriMesh a = makeSphere(1.0, 900), b = makeTorus(0.8, 0.3, 900), c = makeSphere(0.6, 500);
+      b.translate(Vec3(1.85, 0.05, 0));
+      c.translate(Vec3(0.1, 1.5, 0.2));
+      sc->meshes = {a, b, c};
+      sc->registerAll(0.03);
+      std::vector<std::vector<CandidatePair>> steps;
+      std::vector<std::size_t> dropped;
+      std::vector<std::vector<TriMesh>> shapes;  // the meshes at each step
+      for (int s = 0; s < 4; ++s) {
+        for (Vec3& p : sc->meshes[1].vertices) p.x() -= 0.02;
+        for (Vec3& p : sc->meshes[2].vertices) p.y() -= 0.015;
+        const StepResult& r = sc->world.step();
+        steps.push_back(r.candidates);
+        dropped.push_back(r.stats.candidates_not_nearest);
+        shapes.push_back(sc->meshes);
+      }
+      return std::make_tuple(std::move(sc), steps, dropped, shapes);
+    };
+    const auto [full_scene, full, full_dropped, shapes] = run(false);
+    const auto [near_scene, near, near_dropped, near_shapes] = run(true);
+    std::map<BodyId, std::size_t> index;
+    for (std::size_t i = 0; i < full_scene->ids.size(); ++i) index[full_scene->ids[i]] = i;
+    std::size_t kept_total = 0, full_total = 0;
+    for (std::size_t s = 0; s < full.size(); ++s) {
+      EXPECT_EQ(full_dropped[s], 0u);
+      const std::vector<TriMesh>& meshes = shapes[s];  // the same positions in both runs
+      // Least squared distance per (vertex body, vertex, triangle body) over the full set.
+      const auto d2 = [&](const CandidatePair& c) {
+        const TriMesh& vm = meshes[index.at(c.vertex_body)];
+        const TriMesh& tm = meshes[index.at(c.triangle_body)];
+        const Triangle& t = tm.triangles[c.triangle];
+        return detail::filterDistance2(vm.vertices[c.vertex], tm.vertices[t[0]], tm.vertices[t[1]], tm.vertices[t[2]]);
+      };
+      std::map<std::tuple<BodyId, Index, BodyId>, double> least;
+      for (const CandidatePair& c : full[s]) {
+        const auto key = std::make_tuple(c.vertex_body, c.vertex, c.triangle_body);
+        const auto it = least.find(key);
+        if (it == least.end() || d2(c) < it->second) least[key] = d2(c);
+      }
+      std::vector<CandidatePair> expected;
+      for (const CandidatePair& c : full[s])
+        if (d2(c) <= least[std::make_tuple(c.vertex_body, c.vertex, c.triangle_body)] * (1.0 + 2.1e-4)) expected.push_back(c);
+      EXPECT_TRUE(near[s] == expected) << "step " << s << ": " << near[s].size() << " against " << expected.size();
+      EXPECT_EQ(near_dropped[s], full[s].size() - near[s].size());
+      kept_total += near[s].size();
+      full_total += full[s].size();
+    }
+    ASSERT_GT(full_total, 3 * kept_total) << "the scene must give vertices several triangles within reach";
+    EXPECT_GT(kept_total, 100u);
   }
 }
 
