@@ -764,9 +764,15 @@ struct PairContext {
   /// MotionBound::Ahead (two-body pairs): the probes test the paths `ahead_steps` ahead, the exact
   /// distance the radius. 0: not Ahead.
   double ahead_steps = 0.0;
-  /// SensorSettings::nearest_candidates: each candidate's squared distance, parallel to `out`.
+  /// SensorSettings::nearest_candidates: each candidate's squared distance, parallel to `out`, and
+  /// per vertex of vb (by id) the least squared distance kept so far (+infinity: none yet).
   std::vector<double>* out_d2 = nullptr;
+  double* best2 = nullptr;
 };
+
+/// SensorSettings::nearest_candidates keeps a vertex's candidates within this factor of its least
+/// squared distance (a relative 1e-4 on the distance, rounded up).
+constexpr double kNearestBand2 = 1.0 + 2.1e-4;
 
 /// Self-collision's exclusion rule: the triangle holds the vertex, or the two were within the
 /// exclusion distance in the body's rest shape.
@@ -1071,11 +1077,22 @@ void keepWithinReach(const PairContext& ctx, const VertexRec* recs) {
   if (dist != nullptr) dist->resize(first + n);
   double* out_d2 = dist != nullptr ? dist->data() + first : nullptr;
   std::size_t kept = 0;
+  std::size_t not_nearest = 0;
   const auto decide = [&](std::size_t at, double d2) {
     const VertexRec& vr = recs[s.pending[at].first];
     out[kept] = (std::uint64_t{vr.v} << 32) | s.corners[s.pending[at].second].t;
-    if (out_d2 != nullptr) out_d2[kept] = d2;
-    kept += static_cast<std::size_t>(d2 < vr.reach2);
+    bool keep = d2 < vr.reach2;
+    if (out_d2 != nullptr) {
+      out_d2[kept] = d2;
+      // Within reach but outside the band of the vertex's nearest so far: the final pass would
+      // drop it too (the least only falls).
+      double& best = ctx.best2[vr.v];
+      const bool near = d2 <= best * kNearestBand2;
+      not_nearest += static_cast<std::size_t>(keep && !near);
+      if (keep && d2 < best) best = d2;
+      keep = keep && near;
+    }
+    kept += static_cast<std::size_t>(keep);
   };
 #if defined(PSC_HAVE_AVX2_PATH)
   if (useAvx2Probes()) {
@@ -1101,7 +1118,8 @@ void keepWithinReach(const PairContext& ctx, const VertexRec* recs) {
   }
   ctx.out.resize(first + kept);
   if (dist != nullptr) dist->resize(first + kept);
-  ctx.counters.candidates_beyond_reach += n - kept;
+  ctx.counters.candidates_beyond_reach += n - kept - not_nearest;
+  ctx.counters.candidates_not_nearest += not_nearest;
   s.pending.clear();
 }
 
@@ -1272,6 +1290,13 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     // (the picking above and the distance below keep the ball (x, r), which holds every pair the
     // path ahead can keep that is within Bullet's radius).
     Probe pr{vr.x, vr.x, vr.r};
+    if (ctx.best2 != nullptr && ctx.ahead_steps == 0.0) {
+      // nearest_candidates: a triangle farther than the band of the vertex's nearest so far is no
+      // candidate, and its box is no farther than it (the bound a little wider than the band, for
+      // the rounding of the box distance against the exact one).
+      const double band = std::sqrt(ctx.best2[vr.v] * (kNearestBand2 + 1e-5));
+      pr.r = std::min(pr.r, band);
+    }
     double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
     double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
     if (ctx.ahead_steps > 0.0 && !ctx.vb.previous.empty()) {
@@ -1376,8 +1401,9 @@ struct Group {
   std::vector<double> d2;  ///< CullParams::nearest: each key's squared distance
 
   /// CullParams::nearest: keeps, in order, the keys within a relative 1e-4 of their vertex's least
-  /// distance (2.1e-4 on the squares); `least` is a table by vertex id of at least `vertices`
-  /// entries, +infinity on entry and on return. Returns how many went.
+  /// distance (kNearestBand2 on the squares); `least` is a table by vertex id of at least `vertices`
+  /// entries, the collection's running least (PairContext::best2) or +infinity on entry, +infinity
+  /// on return. Returns how many went.
   std::size_t keepNearest(std::size_t vertices, std::vector<double>& least) {
     if (least.size() < vertices) least.resize(vertices, std::numeric_limits<double>::infinity());
     for (std::size_t i = 0; i < keys.size(); ++i) {
@@ -1386,7 +1412,7 @@ struct Group {
     }
     std::size_t out = 0;
     for (std::size_t i = 0; i < keys.size(); ++i)
-      if (d2[i] <= least[keys[i] >> 32] * (1.0 + 2.1e-4)) keys[out++] = keys[i];
+      if (d2[i] <= least[keys[i] >> 32] * kNearestBand2) keys[out++] = keys[i];
     // Each vertex met keeps its nearest key, so the kept keys reach every entry set above.
     for (std::size_t i = 0; i < out; ++i) least[keys[i] >> 32] = std::numeric_limits<double>::infinity();
     const std::size_t gone = keys.size() - out;
@@ -1423,6 +1449,11 @@ class Collector {
     if (s_.items_a.empty()) return;
     regionItems(B, boxA, s_.items_b);
     Group ab{A.id, B.id, {}, {}}, ba{B.id, A.id, {}, {}};
+    if (params_.nearest) {
+      const double inf = std::numeric_limits<double>::infinity();
+      if (least_.size() < A.chunks.chunk_of.size()) least_.resize(A.chunks.chunk_of.size(), inf);
+      if (least_b_.size() < B.chunks.chunk_of.size()) least_b_.resize(B.chunks.chunk_of.size(), inf);
+    }
     region_pairs_.clear();
     sweepBetween(s_.items_a, s_.items_b, [&](Index ri, Index rj) { region_pairs_.emplace_back(ri, rj); });
     // Bullet's contact solver is Gauss-Seidel: contacts in mesh order (not in sweep order) keep
@@ -1431,7 +1462,7 @@ class Collector {
     for (const auto& [ri, rj] : region_pairs_) regionPair(A, ri, B, rj, ab, ba, ahead_steps);
     if (params_.nearest) {
       counters_.candidates_not_nearest += ab.keepNearest(A.chunks.chunk_of.size(), least_);
-      counters_.candidates_not_nearest += ba.keepNearest(B.chunks.chunk_of.size(), least_);
+      counters_.candidates_not_nearest += ba.keepNearest(B.chunks.chunk_of.size(), least_b_);
     }
     if (!ab.keys.empty()) groups.push_back(std::move(ab));
     if (!ba.keys.empty()) groups.push_back(std::move(ba));
@@ -1481,8 +1512,11 @@ class Collector {
     const double exclude = params_.self_rest_exclusion * radius;
     Group g{X.id, X.id, {}, {}};
     const Axis no_axis;
+    if (params_.nearest && least_.size() < X.chunks.chunk_of.size())
+      least_.resize(X.chunks.chunk_of.size(), std::numeric_limits<double>::infinity());
     const PairContext ctx{X,         X,  radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude,
-                          self_motion ? &fit.mean_motion : nullptr, 0.0, params_.nearest ? &g.d2 : nullptr};
+                          self_motion ? &fit.mean_motion : nullptr, 0.0, params_.nearest ? &g.d2 : nullptr,
+                          params_.nearest ? least_.data() : nullptr};
     const auto t0 = std::chrono::steady_clock::now();
     // The rest-shape bound needs the radius bound's reach (a swept pair may meet during the step).
     const bool rest_bound = params_.self_rest_bound && self_motion;
@@ -1550,7 +1584,9 @@ class Collector {
   }
 
  private:
-  std::vector<double> least_;  ///< Group::keepNearest's table by vertex id (+infinity between uses)
+  /// Group::keepNearest's tables by vertex id, for the two directions of a body pair
+  /// (PairContext::best2 while collecting; +infinity between body pairs).
+  std::vector<double> least_, least_b_;
   /// `ahead_steps`: the body pair's PairContext::ahead_steps (0: not on the Ahead bound).
   void regionPair(const Body& A, Index ri, const Body& B, Index rj, Group& ab, Group& ba, double ahead_steps) {
     const double mf = params_.motion_factor;
@@ -1589,9 +1625,11 @@ class Collector {
 
     const auto t0 = std::chrono::steady_clock::now();
     const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab.keys, counters_, s_,
-                           -1.0, nullptr, ahead_steps, params_.nearest ? &ab.d2 : nullptr};
+                           -1.0, nullptr, ahead_steps, params_.nearest ? &ab.d2 : nullptr,
+                           params_.nearest ? least_.data() : nullptr};
     const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba.keys, counters_, s_,
-                           -1.0, nullptr, ahead_steps, params_.nearest ? &ba.d2 : nullptr};
+                           -1.0, nullptr, ahead_steps, params_.nearest ? &ba.d2 : nullptr,
+                           params_.nearest ? least_b_.data() : nullptr};
     const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
     s_.items_a.clear();
     s_.items_b.clear();

@@ -127,8 +127,9 @@ struct SensorSettings {
   /// relative 1e-4 of the vertex's least: its nearest triangle and near ties. For an exact test that
   /// accepts every pair within the contact radius and a solver that keeps one contact per vertex
   /// (psc::bullet's Robust test with ContactSet::NearestFace sets it): the exact stage then sees
-  /// about one pair per vertex instead of every triangle within the radius. StepStats counts the
-  /// rest (candidates_not_nearest). MotionBound::Swept has no such distance, and the thesis's
+  /// about one pair per vertex instead of every triangle within the radius, and once a vertex's
+  /// nearest so far is known its probes skip the triangles beyond that band. StepStats counts the
+  /// pairs measured and left out (candidates_not_nearest). MotionBound::Swept has no such distance, and the thesis's
   /// flag-only mode (Flagging::Sensors) no such filter: both ignore it.
   bool nearest_candidates = false;
 

@@ -94,7 +94,7 @@ struct StepStats {
   std::size_t candidate_triangles = 0;     ///< triangles examined (likewise)
   std::size_t candidate_probes = 0;        ///< (vertex, triangle) box tests made to find them
   std::size_t candidates_beyond_reach = 0; ///< pairs whose boxes meet but whose exact distance exceeds the radius (MotionBound::Radius)
-  std::size_t candidates_not_nearest = 0;  ///< SensorSettings::nearest_candidates: pairs within reach left out, farther than their vertex's nearest
+  std::size_t candidates_not_nearest = 0;  ///< SensorSettings::nearest_candidates: pairs measured within reach and left out, farther than their vertex's nearest (not those its probes already skipped)
   std::size_t candidate_pairs = 0;         ///< unique pairs handed to the exact test
   std::size_t self_region_pairs = 0;       ///< region pairs of one body (self-collision) whose grown boxes overlap
   std::size_t self_candidate_pairs = 0;    ///< of candidate_pairs: a body with itself

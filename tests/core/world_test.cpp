@@ -619,8 +619,8 @@ TEST(Probes, Avx2AndSse2GiveTheSameCandidates) {
 
 // SensorSettings::nearest_candidates keeps, of each vertex's candidates against one body, exactly
 // those within a relative 1e-4 of its nearest by the filter's distance (2.1e-4 on the squares), in
-// the order of the full set, and counts the rest: three bodies pressed into each other over a few
-// steps, with and without the sensor stage.
+// the order of the full set, and counts those it measured and left out: three bodies pressed into
+// each other over a few steps, with and without the sensor stage.
 TEST(Candidates, NearestCandidatesKeepEachVertexsNearestTriangles) {
   for (Flagging flagging : {Flagging::SensorsAndBounds, Flagging::Bounds}) {
     const auto run = [&](bool nearest) {
@@ -671,7 +671,10 @@ TEST(Candidates, NearestCandidatesKeepEachVertexsNearestTriangles) {
       for (const CandidatePair& c : full[s])
         if (d2(c) <= least[std::make_tuple(c.vertex_body, c.vertex, c.triangle_body)] * (1.0 + 2.1e-4)) expected.push_back(c);
       EXPECT_TRUE(near[s] == expected) << "step " << s << ": " << near[s].size() << " against " << expected.size();
-      EXPECT_EQ(near_dropped[s], full[s].size() - near[s].size());
+      // Counted: the pairs measured and left out; the probes skip others for a vertex whose nearest
+      // is already known.
+      EXPECT_LE(near_dropped[s], full[s].size() - near[s].size());
+      EXPECT_GT(near_dropped[s], 0u);
       kept_total += near[s].size();
       full_total += full[s].size();
     }
