@@ -703,6 +703,14 @@ double contactDistance(const btSoftBody::SContact& c) {
   return (toVec(c.m_node->m_x) - p).norm();
 }
 
+/// Two soft spheres of radius 0.5 (800 vertices each, margins 0.05) meeting head-on at 1 unit/s each.
+void addHeadOnSpheres(psc_test::SoftWorld& w) {
+  psc_test::SoftParams p;
+  p.margin = 0.05;
+  w.addSoft(psc::makeSphere(0.5, 800).translate({-0.52, 0, 0}), p, {btScalar(1.0), 0, 0});
+  w.addSoft(psc::makeSphere(0.5, 800).translate({0.52, 0.05, 0}), p, {btScalar(-1.0), 0, 0});
+}
+
 TEST(ExactTests, NearestFaceKeepsEachNodesNearestContactOfAllThoseAccepted) {
   // ContactSet::NearestFace against AllPairs on the same candidates: every node that got a contact
   // keeps exactly one discrete contact (plus, with Continuous, all its crossing contacts), it is
@@ -762,10 +770,7 @@ TEST(ExactTests, NearestFaceIsValidatedAndNamedInThePlugin) {
   EXPECT_STREQ(psc::bullet::toString(psc::bullet::ContactSet::NearestFace), "nearest");
   for (psc::bullet::ContactSet set : {psc::bullet::ContactSet::AllPairs, psc::bullet::ContactSet::NearestFace}) {
     psc_test::SoftWorld w(0);
-    psc_test::SoftParams p;
-    p.margin = 0.05;
-    w.addSoft(psc::makeSphere(0.5, 800).translate({-0.52, 0, 0}), p, {btScalar(1.0), 0, 0});
-    w.addSoft(psc::makeSphere(0.5, 800).translate({0.52, 0.05, 0}), p, {btScalar(-1.0), 0, 0});
+    addHeadOnSpheres(w);
     psc::bullet::Settings settings;
     settings.contacts = set;
     auto plugin = psc::bullet::install(w.world, settings);
@@ -796,10 +801,7 @@ TEST(ExactTests, NearestFaceWithRobustTestsOnlyEachNodesNearestCandidates) {
   // the two runs must make the very same contacts, step for step, from far fewer tests.
   const auto run = [](ExactTest exact, std::size_t& tests, std::size_t& not_nearest) {
     psc_test::SoftWorld w(0);
-    psc_test::SoftParams p;
-    p.margin = 0.05;
-    w.addSoft(psc::makeSphere(0.5, 800).translate({-0.52, 0, 0}), p, {btScalar(1.0), 0, 0});
-    w.addSoft(psc::makeSphere(0.5, 800).translate({0.52, 0.05, 0}), p, {btScalar(-1.0), 0, 0});
+    addHeadOnSpheres(w);
     psc::bullet::Settings settings;
     settings.exact = exact;
     settings.contacts = psc::bullet::ContactSet::NearestFace;
