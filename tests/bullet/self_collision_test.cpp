@@ -8,6 +8,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <set>
+#include <utility>
+#include <vector>
 
 namespace {
 
@@ -71,6 +75,54 @@ TEST(SelfCollision, FoldedClothGetsSelfContactsOnlyWhereSwitchedOn) {
       EXPECT_EQ(plugin.stats().self_contacts, 0u);
     }
   }
+}
+
+TEST(SelfCollision, NearestFaceKeepsOneSelfContactPerNode) {
+  // ContactSet::NearestFace on a body against itself: every node of the folded cloth that gets self
+  // contacts with all pairs keeps exactly one, and the rest are counted out. With Robust the core's
+  // nearest candidates give the contacts Bullet's test gives on all candidates (no face is small).
+  using psc::bullet::ContactSet;
+  using psc::bullet::ExactTest;
+  std::vector<std::set<long>> nodes;  // indices of the nodes with a self contact, per run
+  std::vector<std::size_t> counts;
+  for (const auto& [exact, set] : {std::make_pair(ExactTest::Bullet, ContactSet::AllPairs),
+                                   std::make_pair(ExactTest::Bullet, ContactSet::NearestFace),
+                                   std::make_pair(ExactTest::Robust, ContactSet::NearestFace)}) {
+    Folding f;
+    psc::bullet::Settings settings;
+    settings.self_collision = true;
+    settings.exact = exact;
+    settings.contacts = set;
+    auto plugin = psc::bullet::install(f.w.world, settings);
+    f.w.run(1);
+    fold(*f.cloth, 0.015);
+    std::size_t folded = 0, reduced = 0;
+    std::set<long> with_contact;
+    f.w.run(1, [&] {
+      folded = std::size_t(selfContacts(*f.cloth));
+      reduced = plugin.stats().reduced_contacts;
+      for (int i = 0; i < f.cloth->m_scontacts.size(); ++i)
+        with_contact.insert(long(f.cloth->m_scontacts[i].m_node - &f.cloth->m_nodes[0]));
+    });
+    std::printf("%s, %s: %zu self contacts on %zu nodes, %zu reduced after the exact test\n",
+                psc::bullet::toString(exact), psc::bullet::toString(set), folded, with_contact.size(), reduced);
+    if (set == ContactSet::NearestFace) {
+      EXPECT_EQ(folded, with_contact.size()) << "one self contact per node";
+      // With Bullet's test every candidate is tested and the reduction counts the rest; with
+      // Robust the core hands over only the nearest candidates (and near ties) to begin with.
+      if (exact == ExactTest::Bullet) {
+        EXPECT_EQ(folded + reduced, counts.front()) << "what the reduction left out is counted";
+      }
+    } else {
+      EXPECT_EQ(reduced, 0u);
+    }
+    nodes.push_back(with_contact);
+    counts.push_back(folded);
+  }
+  EXPECT_GT(counts[0], counts[1]) << "a folded node is within the radius of several faces";
+  EXPECT_EQ(nodes[0], nodes[1]) << "no node loses its self contact";
+  EXPECT_EQ(nodes[1], nodes[2]);
+  EXPECT_EQ(counts[1], counts[2]);
 }
 
 TEST(SelfCollision, PerBodySwitchOverridesTheSettings) {

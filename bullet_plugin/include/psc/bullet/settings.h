@@ -53,8 +53,9 @@ enum class ContactSet {
   /// discrete contact nearest to the node (the first of equals, in face order); Continuous's
   /// crossing contacts are all kept. No node that got a contact against a body loses it; the
   /// contacts beside it, which push the same node out of the neighbouring faces' planes, go
-  /// (Stats::reduced_contacts counts them). Bullet's response on them feeds a runaway in a dense
-  /// fine pile (README, "Not done"); with this set it did not run away.
+  /// (Stats::reduced_contacts counts them; with Robust the core hands over only each node's nearest
+  /// candidates, SensorSettings::nearest_candidates). Bullet's response on them feeds a runaway in
+  /// a dense fine pile (README, "Not done"); with this set it did not run away.
   NearestFace,
 };
 

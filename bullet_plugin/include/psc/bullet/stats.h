@@ -45,7 +45,9 @@ struct Stats {
   std::size_t robust_contacts = 0;    ///< of contacts: made where Bullet's test refuses (Settings::exact Robust/Continuous)
   std::size_t crossing_contacts = 0;  ///< of contacts: nodes that passed through a face this step (Continuous)
   /// Contacts the exact test accepted that Settings::contacts = NearestFace left out (not the
-  /// nearest of their node against that body); not in `contacts`.
+  /// nearest of their node against that body); not in `contacts`. With ExactTest::Bullet the
+  /// runaway rule counts them; with Robust the core already left out the candidates beyond each
+  /// node's nearest (core.candidates_not_nearest), so only near ties are left out here.
   std::size_t reduced_contacts = 0;
   std::size_t self_bodies = 0;        ///< bodies collided with themselves this step
   std::size_t self_exact_tests = 0;   ///< of exact_tests: a body's nodes against its own faces
