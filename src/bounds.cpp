@@ -605,7 +605,7 @@ struct ChunkRef {
   Grown box;
   // What the chunk pairs of one region pair read, gathered once per region pair on first use:
   int vertices_at = -1;   ///< offset of this chunk's vertex records in Scratch::verts
-  int triangles_at = -1;  ///< offset of its triangle records in Scratch::tris
+  int triangles_at = -1;  ///< offset of its triangle records in Scratch::tri_lanes
 };
 
 struct VertexRec {
@@ -634,18 +634,42 @@ double reachOf(const Vec3& x, double r) {
   return reach * reach;
 }
 
-/// What a probe reads of a triangle: its box and its extent along the sensor axis (one cache line).
+/// One triangle's record as gatherTriangles builds it, before it goes into TriangleLanes: its box
+/// and its extent along the sensor axis.
 struct TriangleRec {
   Vec3 lo, hi;
   double nlo, nhi;  ///< extent along the sensor axis
   Vec3 rest_mid = Vec3::Zero();  ///< self pairs: the triangle's centroid in the rest shape
 };
 
-/// The rest, read only for the pairs whose boxes meet (parallel to Scratch::tris).
+/// The rest, read only for the pairs whose boxes meet (parallel to Scratch::tri_lanes).
 struct TriangleCorners {
   Vec3 a, b, c;  ///< corners at the current positions (the distance test with MotionBound::Radius)
   Index t;
   Index k;  ///< its place in the chunk lists (ChunkLists::triangle)
+};
+
+/// The gathered triangle records (gatherTriangles), as a structure of arrays parallel to
+/// Scratch::corners: what the kept-triangle pass reads, four at a time with AVX2.
+struct TriangleLanes {
+  std::vector<double> lo_x, lo_y, lo_z, hi_x, hi_y, hi_z, n_lo, n_hi;
+  std::vector<Vec3> rest_mid;  ///< self pairs: the triangle's centroid in the rest shape
+  std::size_t size() const { return lo_x.size(); }
+  void clear() {
+    for (std::vector<double>* v : {&lo_x, &lo_y, &lo_z, &hi_x, &hi_y, &hi_z, &n_lo, &n_hi}) v->clear();
+    rest_mid.clear();
+  }
+  void push(const TriangleRec& tr) {
+    lo_x.push_back(tr.lo.x());
+    lo_y.push_back(tr.lo.y());
+    lo_z.push_back(tr.lo.z());
+    hi_x.push_back(tr.hi.x());
+    hi_y.push_back(tr.hi.y());
+    hi_z.push_back(tr.hi.z());
+    n_lo.push_back(tr.nlo);
+    n_hi.push_back(tr.nhi);
+    rest_mid.push_back(tr.rest_mid);
+  }
 };
 
 /// The triangles of one chunk pair that reach the vertex chunk's box, as a structure of arrays:
@@ -653,7 +677,7 @@ struct TriangleCorners {
 struct KeptTriangles {
   std::vector<double> lo_x, lo_y, lo_z, hi_x, hi_y, hi_z, n_lo, n_hi;
   std::vector<double> mid_x, mid_y, mid_z;  ///< self pairs: rest centroids
-  std::vector<Index> record;  ///< index into Scratch::tris / Scratch::corners
+  std::vector<Index> record;  ///< index into Scratch::tri_lanes / Scratch::corners
   std::vector<unsigned char> meets;  ///< per probe: 1 when the vertex's ball meets the triangle's box
   std::size_t size() const { return count_; }
   /// Empties the set, with room for `most` triangles (the arrays only grow: pushes write in place).
@@ -665,22 +689,23 @@ struct KeptTriangles {
     record.resize(most);
     meets.resize(most);
   }
-  void push(const TriangleRec& tr, Index k, bool self) {
+  /// Appends gathered triangle k of `t`.
+  void push(const TriangleLanes& t, std::size_t k, bool self) {
     const std::size_t j = count_++;
     if (self) {
-      mid_x[j] = tr.rest_mid.x();
-      mid_y[j] = tr.rest_mid.y();
-      mid_z[j] = tr.rest_mid.z();
+      mid_x[j] = t.rest_mid[k].x();
+      mid_y[j] = t.rest_mid[k].y();
+      mid_z[j] = t.rest_mid[k].z();
     }
-    lo_x[j] = tr.lo.x();
-    lo_y[j] = tr.lo.y();
-    lo_z[j] = tr.lo.z();
-    hi_x[j] = tr.hi.x();
-    hi_y[j] = tr.hi.y();
-    hi_z[j] = tr.hi.z();
-    n_lo[j] = tr.nlo;
-    n_hi[j] = tr.nhi;
-    record[j] = k;
+    lo_x[j] = t.lo_x[k];
+    lo_y[j] = t.lo_y[k];
+    lo_z[j] = t.lo_z[k];
+    hi_x[j] = t.hi_x[k];
+    hi_y[j] = t.hi_y[k];
+    hi_z[j] = t.hi_z[k];
+    n_lo[j] = t.n_lo[k];
+    n_hi[j] = t.n_hi[k];
+    record[j] = static_cast<Index>(k);
   }
 
  private:
@@ -703,31 +728,11 @@ struct VertexLanes {
   }
 };
 
-/// What the kept-triangle pass of chunkCandidates reads of each gathered triangle, as a structure
-/// of arrays parallel to Scratch::tris.
-struct TriangleLanes {
-  std::vector<double> lo_x, lo_y, lo_z, hi_x, hi_y, hi_z, n_lo, n_hi;
-  void clear() {
-    for (std::vector<double>* v : {&lo_x, &lo_y, &lo_z, &hi_x, &hi_y, &hi_z, &n_lo, &n_hi}) v->clear();
-  }
-  void push(const TriangleRec& tr) {
-    lo_x.push_back(tr.lo.x());
-    lo_y.push_back(tr.lo.y());
-    lo_z.push_back(tr.lo.z());
-    hi_x.push_back(tr.hi.x());
-    hi_y.push_back(tr.hi.y());
-    hi_z.push_back(tr.hi.z());
-    n_lo.push_back(tr.nlo);
-    n_hi.push_back(tr.nhi);
-  }
-};
-
 struct Scratch {
   std::vector<SweepItem> items_a, items_b;
   std::vector<ChunkRef> near_a, near_b;
   std::vector<VertexRec> verts;
   VertexLanes vert_lanes;
-  std::vector<TriangleRec> tris;
   TriangleLanes tri_lanes;
   std::vector<TriangleCorners> corners;
   KeptTriangles kept;
@@ -740,7 +745,6 @@ struct Scratch {
   void clearRecords() {
     verts.clear();
     vert_lanes.clear();
-    tris.clear();
     tri_lanes.clear();
     corners.clear();
   }
@@ -791,9 +795,9 @@ bool excludedSelfPair(const PairContext& ctx, Index v, const Triangle& tri) {
 void gatherVertices(const PairContext& ctx, ChunkRef& c) {
   if (c.vertices_at >= 0) return;
   c.vertices_at = static_cast<int>(ctx.s.verts.size());
-  const bool swept = ctx.swept && !ctx.vb.previous.empty();
-  const bool self_motion = ctx.self_mean_motion != nullptr && !ctx.vb.previous.empty();
   const bool moved = !ctx.vb.previous.empty();
+  const bool swept = ctx.swept && moved;
+  const bool self_motion = ctx.self_mean_motion != nullptr && moved;
   for (Index v : ctx.vb.chunks.vertices(c.chunk)) {
     Vec3 x = ctx.vb.positions[v];
     const Vec3 q = moved ? ctx.vb.previous[v] : x;
@@ -813,7 +817,7 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
 
 void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   if (c.triangles_at >= 0) return;
-  c.triangles_at = static_cast<int>(ctx.s.tris.size());
+  c.triangles_at = static_cast<int>(ctx.s.tri_lanes.size());
   const ChunkLists& ch = ctx.tb.chunks;
   const bool swept = ctx.swept && !ctx.tb.previous.empty();
   const bool ahead = ctx.ahead_steps > 0.0 && !ctx.tb.previous.empty();
@@ -843,7 +847,6 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
         }
       }
     }
-    ctx.s.tris.push_back(rec);
     ctx.s.tri_lanes.push(rec);
     ctx.s.corners.push_back({a, b, cc, ch.triangleId(c.chunk, at), static_cast<Index>(at)});
   }
@@ -1145,14 +1148,12 @@ std::size_t pickScalar(const VertexLanes& lanes, std::size_t at, std::size_t fro
 /// The kept-triangle pass of chunkCandidates, one triangle at a time: of the `nt` triangles from
 /// `at`, those whose box meets [lo, hi] and whose extent along the sensor axis meets [n_lo, n_hi],
 /// into `kept` in order. Starts at triangle `from`.
-void keepScalar(const Scratch& s, std::size_t at, std::size_t from, std::size_t nt, const Vec3& lo, const Vec3& hi,
-                double n_lo, double n_hi, bool self, KeptTriangles& kept) {
-  for (std::size_t k = from; k < nt; ++k) {
-    const TriangleRec& tr = s.tris[at + k];
-    const bool meets = (tr.lo.x() <= hi.x()) & (tr.lo.y() <= hi.y()) & (tr.lo.z() <= hi.z()) &
-                       (lo.x() <= tr.hi.x()) & (lo.y() <= tr.hi.y()) & (lo.z() <= tr.hi.z()) &
-                       (tr.nhi >= n_lo) & (tr.nlo <= n_hi);
-    if (meets) kept.push(tr, static_cast<Index>(at + k), self);
+void keepScalar(const TriangleLanes& t, std::size_t at, std::size_t from, std::size_t nt, const Vec3& lo,
+                const Vec3& hi, double n_lo, double n_hi, bool self, KeptTriangles& kept) {
+  for (std::size_t k = at + from; k < at + nt; ++k) {
+    const bool meets = (t.lo_x[k] <= hi.x()) & (t.lo_y[k] <= hi.y()) & (t.lo_z[k] <= hi.z()) & (lo.x() <= t.hi_x[k]) &
+                       (lo.y() <= t.hi_y[k]) & (lo.z() <= t.hi_z[k]) & (t.n_hi[k] >= n_lo) & (t.n_lo[k] <= n_hi);
+    if (meets) kept.push(t, k, self);
   }
 }
 
@@ -1195,9 +1196,8 @@ void keepScalar(const Scratch& s, std::size_t at, std::size_t from, std::size_t 
 
 /// keepScalar four triangles per instruction (AVX2), for pairs of two bodies: the same comparisons
 /// of the same values, so the same triangles in the same order.
-[[gnu::target("avx2")]] void keepAvx2(const Scratch& s, std::size_t at, std::size_t nt, const Vec3& lo, const Vec3& hi,
-                                      double n_lo, double n_hi, KeptTriangles& kept) {
-  const TriangleLanes& t = s.tri_lanes;
+[[gnu::target("avx2")]] void keepAvx2(const TriangleLanes& t, std::size_t at, std::size_t nt, const Vec3& lo,
+                                      const Vec3& hi, double n_lo, double n_hi, KeptTriangles& kept) {
   const __m256d vlx = _mm256_set1_pd(lo.x()), vly = _mm256_set1_pd(lo.y()), vlz = _mm256_set1_pd(lo.z());
   const __m256d vhx = _mm256_set1_pd(hi.x()), vhy = _mm256_set1_pd(hi.y()), vhz = _mm256_set1_pd(hi.z());
   const __m256d vnl = _mm256_set1_pd(n_lo), vnh = _mm256_set1_pd(n_hi);
@@ -1217,12 +1217,12 @@ void keepScalar(const Scratch& s, std::size_t at, std::size_t from, std::size_t 
     unsigned m = static_cast<unsigned>(_mm256_movemask_pd(_mm256_and_pd(a, b)));
     while (m != 0) {
       const std::size_t l = static_cast<std::size_t>(__builtin_ctz(m));
-      kept.push(s.tris[j + l], static_cast<Index>(j + l), false);
+      kept.push(t, j + l, false);
       m &= m - 1;
     }
   }
   _mm256_zeroupper();
-  keepScalar(s, at, k, nt, lo, hi, n_lo, n_hi, false, kept);
+  keepScalar(t, at, k, nt, lo, hi, n_lo, n_hi, false, kept);
 }
 #endif
 
@@ -1276,10 +1276,10 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       const auto at_t = static_cast<std::size_t>(ct.triangles_at);
 #if defined(PSC_HAVE_AVX2_PATH)
       if (avx2 && !self)
-        keepAvx2(s, at_t, nt, lo, hi, n_lo, n_hi, kept);
+        keepAvx2(s.tri_lanes, at_t, nt, lo, hi, n_lo, n_hi, kept);
       else
 #endif
-        keepScalar(s, at_t, 0, nt, lo, hi, n_lo, n_hi, self, kept);
+        keepScalar(s.tri_lanes, at_t, 0, nt, lo, hi, n_lo, n_hi, self, kept);
       if (s.hits.size() < nt) s.hits.resize(nt);
       ready = true;
     }
@@ -1401,19 +1401,14 @@ struct Group {
   std::vector<double> d2;  ///< CullParams::nearest: each key's squared distance
 
   /// CullParams::nearest: keeps, in order, the keys within a relative 1e-4 of their vertex's least
-  /// distance (kNearestBand2 on the squares); `least` is a table by vertex id of at least `vertices`
-  /// entries, the collection's running least (PairContext::best2) or +infinity on entry, +infinity
-  /// on return. Returns how many went.
-  std::size_t keepNearest(std::size_t vertices, std::vector<double>& least) {
-    if (least.size() < vertices) least.resize(vertices, std::numeric_limits<double>::infinity());
-    for (std::size_t i = 0; i < keys.size(); ++i) {
-      double& l = least[keys[i] >> 32];
-      l = std::min(l, d2[i]);
-    }
+  /// distance (kNearestBand2 on the squares). `least` is the table by vertex id that collected them
+  /// (PairContext::best2: each vertex's least kept distance, +infinity for the others); it is all
+  /// +infinity again on return. Returns how many went.
+  std::size_t keepNearest(std::vector<double>& least) {
     std::size_t out = 0;
     for (std::size_t i = 0; i < keys.size(); ++i)
       if (d2[i] <= least[keys[i] >> 32] * kNearestBand2) keys[out++] = keys[i];
-    // Each vertex met keeps its nearest key, so the kept keys reach every entry set above.
+    // Each vertex met keeps its nearest key, so the kept keys reach every entry collection set.
     for (std::size_t i = 0; i < out; ++i) least[keys[i] >> 32] = std::numeric_limits<double>::infinity();
     const std::size_t gone = keys.size() - out;
     keys.resize(out);
@@ -1461,8 +1456,8 @@ class Collector {
     std::sort(region_pairs_.begin(), region_pairs_.end());
     for (const auto& [ri, rj] : region_pairs_) regionPair(A, ri, B, rj, ab, ba, ahead_steps);
     if (params_.nearest) {
-      counters_.candidates_not_nearest += ab.keepNearest(A.chunks.chunk_of.size(), least_);
-      counters_.candidates_not_nearest += ba.keepNearest(B.chunks.chunk_of.size(), least_b_);
+      counters_.candidates_not_nearest += ab.keepNearest(least_);
+      counters_.candidates_not_nearest += ba.keepNearest(least_b_);
     }
     if (!ab.keys.empty()) groups.push_back(std::move(ab));
     if (!ba.keys.empty()) groups.push_back(std::move(ba));
@@ -1575,7 +1570,7 @@ class Collector {
         if (&ca != &cb) collect(cb, ca);
       }
     }
-    if (params_.nearest) counters_.candidates_not_nearest += g.keepNearest(X.chunks.chunk_of.size(), least_);
+    if (params_.nearest) counters_.candidates_not_nearest += g.keepNearest(least_);
     counters_.ms_candidates += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     if (!g.keys.empty()) {
       std::sort(g.keys.begin(), g.keys.end());
