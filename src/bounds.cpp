@@ -680,14 +680,28 @@ struct KeptTriangles {
   std::vector<Index> record;  ///< index into Scratch::tri_lanes / Scratch::corners
   std::vector<unsigned char> meets;  ///< per probe: 1 when the vertex's ball meets the triangle's box
   std::size_t size() const { return count_; }
-  /// Empties the set, with room for `most` triangles (the arrays only grow: pushes write in place).
+  /// Empties the set, with room for `most` triangles and the padding (the arrays only grow: pushes
+  /// write in place).
   void reset(std::size_t most) {
     count_ = 0;
+    most += 3;
     if (record.size() >= most) return;
     for (std::vector<double>* v : {&lo_x, &lo_y, &lo_z, &hi_x, &hi_y, &hi_z, &n_lo, &n_hi, &mid_x, &mid_y, &mid_z})
       v->resize(most);
     record.resize(most);
     meets.resize(most);
+  }
+  /// Fills the set up to a multiple of four with boxes that meet nothing (empty, at +infinity and
+  /// with an empty extent along the axis): the four-wide probe loop then needs no scalar tail.
+  /// Returns the padded size; size() stays the count of real triangles.
+  std::size_t pad() {
+    const double inf = std::numeric_limits<double>::infinity();
+    std::size_t j = count_;
+    for (; j % 4 != 0; ++j) {
+      lo_x[j] = lo_y[j] = lo_z[j] = n_lo[j] = inf;
+      hi_x[j] = hi_y[j] = hi_z[j] = n_hi[j] = -inf;
+    }
+    return j;
   }
   /// Appends gathered triangle k of `t`.
   void push(const TriangleLanes& t, std::size_t k, bool self) {
@@ -948,8 +962,9 @@ std::size_t collectMeets(const KeptTriangles& kept, const Probe& pr, double n_lo
 /// collectMeets<false> four triangles per instruction, for processors with AVX2 (chosen at run
 /// time). The same operations in the same order as the SSE2 loop, without fused multiply-adds, so
 /// the same triangles pass.
-[[gnu::target("avx2")]] std::size_t collectMeetsAvx2(const KeptTriangles& kept, const Probe& pr, double n_lo,
-                                                     double n_hi, unsigned char* meets, Index* hits) {
+/// `padded`: KeptTriangles::pad()'s size (the loop then has no tail), or kept.size().
+[[gnu::target("avx2")]] std::size_t collectMeetsAvx2(const KeptTriangles& kept, std::size_t padded, const Probe& pr,
+                                                     double n_lo, double n_hi, unsigned char* meets, Index* hits) {
   const std::size_t m = kept.size();
   const double r2 = pr.r * pr.r;
   const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
@@ -961,7 +976,7 @@ std::size_t collectMeets(const KeptTriangles& kept, const Probe& pr, double n_lo
   const __m256d vnl = _mm256_set1_pd(n_lo), vnh = _mm256_set1_pd(n_hi), zero = _mm256_setzero_pd();
   std::size_t j = 0;
   int any = 0;
-  for (; j + 4 <= m; j += 4) {
+  for (; j + 4 <= padded; j += 4) {
     const __m256d dx = _mm256_max_pd(
         zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lx + j), hix), _mm256_sub_pd(lox, _mm256_loadu_pd(hx + j))));
     const __m256d dy = _mm256_max_pd(
@@ -1226,6 +1241,38 @@ void keepScalar(const TriangleLanes& t, std::size_t at, std::size_t from, std::s
 }
 #endif
 
+/// Narrows the kept-triangle pass's box [lo, hi] and axis extent [n_lo, n_hi] to the union of what
+/// the picked vertices' probes test: the box of each ball (x, r) and [xn − r, xn + r] along the
+/// sensor axis. A triangle outside that union fails every probe, so none is lost. The axis bounds
+/// are the probes' own values; the box grows by a relative 1e-9, so that a probe that passes by
+/// rounding (a box distance of r up to an ulp) still finds its triangle kept.
+void narrowToPicks(const VertexLanes& lanes, std::size_t at, const Index* picked, std::size_t n_picked, bool sensors,
+                   Vec3& lo, Vec3& hi, double& n_lo, double& n_hi) {
+  if (n_picked == 0) return;
+  const double inf = std::numeric_limits<double>::infinity();
+  double lx = inf, ly = inf, lz = inf, hx = -inf, hy = -inf, hz = -inf, nl = inf, nh = -inf, scale = 0.0;
+  for (std::size_t k = 0; k < n_picked; ++k) {
+    const std::size_t i = at + picked[k];
+    const double x = lanes.x[i], y = lanes.y[i], z = lanes.z[i], r = lanes.r[i], xn = lanes.n[i];
+    lx = std::min(lx, x - r);
+    ly = std::min(ly, y - r);
+    lz = std::min(lz, z - r);
+    hx = std::max(hx, x + r);
+    hy = std::max(hy, y + r);
+    hz = std::max(hz, z + r);
+    nl = std::min(nl, xn - r);
+    nh = std::max(nh, xn + r);
+    scale = std::max(scale, std::max({std::abs(x), std::abs(y), std::abs(z)}) + r);
+  }
+  const double slack = 1e-9 * scale;
+  lo = lo.cwiseMax(Vec3(lx - slack, ly - slack, lz - slack));
+  hi = hi.cwiseMin(Vec3(hx + slack, hy + slack, hz + slack));
+  if (sensors) {
+    n_lo = std::max(n_lo, nl);
+    n_hi = std::min(n_hi, nh);
+  }
+}
+
 // Vertices of chunk cv (of ctx.vb) against the triangles owned by chunk ct (of ctx.tb).
 void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
   const std::size_t nt = ctx.tb.chunks.triangleCount(ct.chunk);
@@ -1238,7 +1285,6 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
 #endif
   gatherVertices(ctx, cv);
   const std::size_t nv = ctx.vb.chunks.vertices(cv.chunk).size();
-  bool ready = false;
   Scratch& s = ctx.s;
   std::size_t probes = 0;
   // The vertices that can meet a triangle of ct: within r of its extent along the sensor axis (the
@@ -1260,29 +1306,39 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
 #endif
     n_picked = pickScalar(s.vert_lanes, at_v, 0, nv, 0, tbox, slab_lo, slab_hi, s.picked.data(), dropped);
   ctx.counters.vertices_dropped += dropped;
+  if (n_picked == 0) return;
+  [[maybe_unused]] std::size_t padded = 0;  // the kept triangles, padded for collectMeetsAvx2
+  // Only the triangles that reach the vertex chunk's grown box can meet any of its vertices.
+  gatherTriangles(ctx, ct);
+  {
+    KeptTriangles& kept = s.kept;
+    kept.reset(nt);
+    const Grown& vbox = cv.box;
+    const double g = ctx.triangle_share;
+    // The vertex chunk's box and axis extent, brought to the triangles' side of the comparisons.
+    Vec3 lo = vbox.lo.array() - g, hi = vbox.hi.array() + g;
+    double n_lo = sensors ? cv.lo_n - vbox.g - g : -inf;
+    double n_hi = sensors ? cv.hi_n + vbox.g + g : inf;
+    // Narrowed to what the picked vertices' probes can reach: a chunk pair's picks lie where the
+    // two chunks overlap, often a small part of the vertex chunk's box. (The probes test the balls
+    // (x, r), except on the Ahead bound: the boxes of the paths ahead.)
+    if (ctx.ahead_steps == 0.0) narrowToPicks(s.vert_lanes, at_v, s.picked.data(), n_picked, sensors, lo, hi, n_lo, n_hi);
+    const auto at_t = static_cast<std::size_t>(ct.triangles_at);
+#if defined(PSC_HAVE_AVX2_PATH)
+    if (avx2 && !self)
+      keepAvx2(s.tri_lanes, at_t, nt, lo, hi, n_lo, n_hi, kept);
+    else
+#endif
+      keepScalar(s.tri_lanes, at_t, 0, nt, lo, hi, n_lo, n_hi, self, kept);
+    if (kept.size() == 0) return;
+    padded = kept.size();
+#if defined(PSC_HAVE_AVX2_PATH)
+    if (avx2 && !self) padded = kept.pad();
+#endif
+    if (s.hits.size() < nt) s.hits.resize(nt);
+  }
   for (std::size_t pick = 0; pick < n_picked; ++pick) {
     const VertexRec& vr = recs[s.picked[pick]];
-    if (!ready) {
-      // Only the triangles that reach the vertex chunk's grown box can meet any of its vertices.
-      gatherTriangles(ctx, ct);
-      KeptTriangles& kept = s.kept;
-      kept.reset(nt);
-      const Grown& vbox = cv.box;
-      const double g = ctx.triangle_share;
-      // The vertex chunk's box and axis extent, brought to the triangles' side of the comparisons.
-      const Vec3 lo = vbox.lo.array() - g, hi = vbox.hi.array() + g;
-      const double n_lo = sensors ? cv.lo_n - vbox.g - g : -std::numeric_limits<double>::infinity();
-      const double n_hi = sensors ? cv.hi_n + vbox.g + g : std::numeric_limits<double>::infinity();
-      const auto at_t = static_cast<std::size_t>(ct.triangles_at);
-#if defined(PSC_HAVE_AVX2_PATH)
-      if (avx2 && !self)
-        keepAvx2(s.tri_lanes, at_t, nt, lo, hi, n_lo, n_hi, kept);
-      else
-#endif
-        keepScalar(s.tri_lanes, at_t, 0, nt, lo, hi, n_lo, n_hi, self, kept);
-      if (s.hits.size() < nt) s.hits.resize(nt);
-      ready = true;
-    }
     const KeptTriangles& kept = s.kept;
     const std::size_t m = kept.size();
     probes += m;
@@ -1315,7 +1371,7 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       n_hits = collectMeets<true>(kept, pr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, s.kept.meets.data(), hits);
 #if defined(PSC_HAVE_AVX2_PATH)
     else if (avx2)
-      n_hits = collectMeetsAvx2(kept, pr, n_lo, n_hi, s.kept.meets.data(), hits);
+      n_hits = collectMeetsAvx2(kept, padded, pr, n_lo, n_hi, s.kept.meets.data(), hits);
 #endif
     else
       n_hits = collectMeets<false>(kept, pr, n_lo, n_hi, Vec3::Zero(), 0.0, s.kept.meets.data(), hits);
