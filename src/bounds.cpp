@@ -659,16 +659,23 @@ struct TriangleLanes {
     for (std::vector<double>* v : {&lo_x, &lo_y, &lo_z, &hi_x, &hi_y, &hi_z, &n_lo, &n_hi}) v->clear();
     rest_mid.clear();
   }
-  void push(const TriangleRec& tr) {
-    lo_x.push_back(tr.lo.x());
-    lo_y.push_back(tr.lo.y());
-    lo_z.push_back(tr.lo.z());
-    hi_x.push_back(tr.hi.x());
-    hi_y.push_back(tr.hi.y());
-    hi_z.push_back(tr.hi.z());
-    n_lo.push_back(tr.nlo);
-    n_hi.push_back(tr.nhi);
-    rest_mid.push_back(tr.rest_mid);
+  /// Room for `n` more records; returns where they start (written with set, no check per record).
+  std::size_t grow(std::size_t n) {
+    const std::size_t at = size();
+    for (std::vector<double>* v : {&lo_x, &lo_y, &lo_z, &hi_x, &hi_y, &hi_z, &n_lo, &n_hi}) v->resize(at + n);
+    rest_mid.resize(at + n);
+    return at;
+  }
+  void set(std::size_t k, const TriangleRec& tr) {
+    lo_x[k] = tr.lo.x();
+    lo_y[k] = tr.lo.y();
+    lo_z[k] = tr.lo.z();
+    hi_x[k] = tr.hi.x();
+    hi_y[k] = tr.hi.y();
+    hi_z[k] = tr.hi.z();
+    n_lo[k] = tr.nlo;
+    n_hi[k] = tr.nhi;
+    rest_mid[k] = tr.rest_mid;
   }
 };
 
@@ -732,13 +739,6 @@ struct VertexLanes {
   std::vector<double> x, y, z, r, n;
   void clear() {
     for (std::vector<double>* v : {&x, &y, &z, &r, &n}) v->clear();
-  }
-  void push(const VertexRec& vr) {
-    x.push_back(vr.x.x());
-    y.push_back(vr.x.y());
-    z.push_back(vr.x.z());
-    r.push_back(vr.r);
-    n.push_back(vr.xn);
   }
 };
 
@@ -812,7 +812,14 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
   const bool moved = !ctx.vb.previous.empty();
   const bool swept = ctx.swept && moved;
   const bool self_motion = ctx.self_mean_motion != nullptr && moved;
-  for (Index v : ctx.vb.chunks.vertices(c.chunk)) {
+  const IndexRange list = ctx.vb.chunks.vertices(c.chunk);
+  // Sized once, then written in place (no capacity check per push).
+  const std::size_t at = ctx.s.verts.size(), n = list.size();
+  ctx.s.verts.resize(at + n);
+  VertexLanes& lanes = ctx.s.vert_lanes;
+  for (std::vector<double>* l : {&lanes.x, &lanes.y, &lanes.z, &lanes.r, &lanes.n}) l->resize(at + n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const Index v = list[k];
     Vec3 x = ctx.vb.positions[v];
     const Vec3 q = moved ? ctx.vb.previous[v] : x;
     // Body::vertexMotion, or the self motion term.
@@ -823,10 +830,15 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
       r = ctx.margin_sum + 0.5 * (x - q).norm();
       x = 0.5 * (x + q);
     }
-    ctx.s.verts.push_back({x, r, ctx.axis.valid ? ctx.axis.project(x) : 0.0, v, swept ? 0.0 : reachOf(x, r)});
-    ctx.s.vert_lanes.push(ctx.s.verts.back());
+    const double xn = ctx.axis.valid ? ctx.axis.project(x) : 0.0;
+    ctx.s.verts[at + k] = {x, r, xn, v, swept ? 0.0 : reachOf(x, r)};
+    lanes.x[at + k] = x.x();
+    lanes.y[at + k] = x.y();
+    lanes.z[at + k] = x.z();
+    lanes.r[at + k] = r;
+    lanes.n[at + k] = xn;
   }
-  ctx.counters.candidate_vertices += ctx.vb.chunks.vertices(c.chunk).size();
+  ctx.counters.candidate_vertices += n;
 }
 
 void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
@@ -835,7 +847,10 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   const ChunkLists& ch = ctx.tb.chunks;
   const bool swept = ctx.swept && !ctx.tb.previous.empty();
   const bool ahead = ctx.ahead_steps > 0.0 && !ctx.tb.previous.empty();
-  for (std::size_t at = ch.triangle_begin[c.chunk]; at < ch.triangle_begin[c.chunk + 1]; ++at) {
+  const std::size_t first = ch.triangle_begin[c.chunk];
+  const std::size_t out = ctx.s.tri_lanes.grow(ch.triangle_begin[c.chunk + 1] - first);
+  ctx.s.corners.resize(out + ch.triangle_begin[c.chunk + 1] - first);
+  for (std::size_t at = first; at < ch.triangle_begin[c.chunk + 1]; ++at) {
     const Triangle tri = ch.triangle(c.chunk, at);
     const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], cc = ctx.tb.positions[tri[2]];
     TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0};
@@ -861,8 +876,8 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
         }
       }
     }
-    ctx.s.tri_lanes.push(rec);
-    ctx.s.corners.push_back({a, b, cc, ch.triangleId(c.chunk, at), static_cast<Index>(at)});
+    ctx.s.tri_lanes.set(out + (at - first), rec);
+    ctx.s.corners[out + (at - first)] = {a, b, cc, ch.triangleId(c.chunk, at), static_cast<Index>(at)};
   }
   ctx.counters.candidate_triangles += ch.triangleCount(c.chunk);
 }
