@@ -1027,6 +1027,56 @@ std::size_t collectMeets(const KeptTriangles& kept, const Probe& pr, double n_lo
 #endif
 
 #if defined(PSC_HAVE_AVX2_PATH)
+/// collectMeets<true> (self pairs) four triangles per instruction (AVX2): the same operations in
+/// the same order as its SSE2 loop, so the same triangles pass, in the same order. `padded`:
+/// KeptTriangles::pad()'s size (its boxes meet nothing, so no tail; the padding's rest centroids are
+/// never read as a pass).
+[[gnu::target("avx2")]] std::size_t collectSelfMeetsAvx2(const KeptTriangles& kept, std::size_t padded,
+                                                         const Probe& pr, double n_lo, double n_hi, const Vec3& rest,
+                                                         double exclude2, Index* hits) {
+  const double r2 = pr.r * pr.r;
+  const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
+  const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
+  const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
+  const double *gx = kept.mid_x.data(), *gy = kept.mid_y.data(), *gz = kept.mid_z.data();
+  const Index* record = kept.record.data();
+  const __m256d lox = _mm256_set1_pd(pr.lo.x()), loy = _mm256_set1_pd(pr.lo.y()), loz = _mm256_set1_pd(pr.lo.z());
+  const __m256d hix = _mm256_set1_pd(pr.hi.x()), hiy = _mm256_set1_pd(pr.hi.y()), hiz = _mm256_set1_pd(pr.hi.z());
+  const __m256d vr2 = _mm256_set1_pd(r2);
+  const __m256d vnl = _mm256_set1_pd(n_lo), vnh = _mm256_set1_pd(n_hi), zero = _mm256_setzero_pd();
+  const __m256d px = _mm256_set1_pd(rest.x()), py = _mm256_set1_pd(rest.y()), pz = _mm256_set1_pd(rest.z());
+  const __m256d e2 = _mm256_set1_pd(exclude2);
+  std::size_t n_hits = 0;
+  for (std::size_t j = 0; j + 4 <= padded; j += 4) {
+    const __m256d dx = _mm256_max_pd(
+        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lx + j), hix), _mm256_sub_pd(lox, _mm256_loadu_pd(hx + j))));
+    const __m256d dy = _mm256_max_pd(
+        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(ly + j), hiy), _mm256_sub_pd(loy, _mm256_loadu_pd(hy + j))));
+    const __m256d dz = _mm256_max_pd(
+        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lz + j), hiz), _mm256_sub_pd(loz, _mm256_loadu_pd(hz + j))));
+    const __m256d d2 =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz));
+    const __m256d ex = _mm256_sub_pd(_mm256_loadu_pd(gx + j), px), ey = _mm256_sub_pd(_mm256_loadu_pd(gy + j), py);
+    const __m256d ez = _mm256_sub_pd(_mm256_loadu_pd(gz + j), pz);
+    const __m256d g2 =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)), _mm256_mul_pd(ez, ez));
+    const __m256d ok = _mm256_and_pd(
+        _mm256_and_pd(_mm256_cmp_pd(d2, vr2, _CMP_LE_OQ), _mm256_cmp_pd(g2, e2, _CMP_GE_OQ)),
+        _mm256_and_pd(_mm256_cmp_pd(vnh, _mm256_loadu_pd(tnl + j), _CMP_GE_OQ),
+                      _mm256_cmp_pd(vnl, _mm256_loadu_pd(tnh + j), _CMP_LE_OQ)));
+    // Most self pairs the boxes keep are neighbours at rest: passes are rare, so a branch.
+    unsigned mask = static_cast<unsigned>(_mm256_movemask_pd(ok));
+    while (mask != 0) {
+      hits[n_hits++] = record[j + static_cast<std::size_t>(__builtin_ctz(mask))];
+      mask &= mask - 1;
+    }
+  }
+  _mm256_zeroupper();  // as in collectMeetsAvx2: the SSE code after it runs with a clean state
+  return n_hits;
+}
+#endif
+
+#if defined(PSC_HAVE_AVX2_PATH)
 /// FilterDistance::of for four pairs at once (AVX2, chosen at run time): the same operations in the
 /// same order, without fused multiply-adds, so the same bits.
 struct FilterDistance4 {
@@ -1224,10 +1274,10 @@ void keepScalar(const TriangleLanes& t, std::size_t at, std::size_t from, std::s
   return pickScalar(lanes, at, i, nv, n, tbox, lo_n, hi_n, picked, dropped);
 }
 
-/// keepScalar four triangles per instruction (AVX2), for pairs of two bodies: the same comparisons
-/// of the same values, so the same triangles in the same order.
+/// keepScalar four triangles per instruction (AVX2): the same comparisons of the same values, so
+/// the same triangles in the same order.
 [[gnu::target("avx2")]] void keepAvx2(const TriangleLanes& t, std::size_t at, std::size_t nt, const Vec3& lo,
-                                      const Vec3& hi, double n_lo, double n_hi, KeptTriangles& kept) {
+                                      const Vec3& hi, double n_lo, double n_hi, bool self, KeptTriangles& kept) {
   const __m256d vlx = _mm256_set1_pd(lo.x()), vly = _mm256_set1_pd(lo.y()), vlz = _mm256_set1_pd(lo.z());
   const __m256d vhx = _mm256_set1_pd(hi.x()), vhy = _mm256_set1_pd(hi.y()), vhz = _mm256_set1_pd(hi.z());
   const __m256d vnl = _mm256_set1_pd(n_lo), vnh = _mm256_set1_pd(n_hi);
@@ -1247,12 +1297,12 @@ void keepScalar(const TriangleLanes& t, std::size_t at, std::size_t from, std::s
     unsigned m = static_cast<unsigned>(_mm256_movemask_pd(_mm256_and_pd(a, b)));
     while (m != 0) {
       const std::size_t l = static_cast<std::size_t>(__builtin_ctz(m));
-      kept.push(t, j + l, false);
+      kept.push(t, j + l, self);
       m &= m - 1;
     }
   }
   _mm256_zeroupper();
-  keepScalar(t, at, k, nt, lo, hi, n_lo, n_hi, false, kept);
+  keepScalar(t, at, k, nt, lo, hi, n_lo, n_hi, self, kept);
 }
 #endif
 
@@ -1340,15 +1390,15 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     if (ctx.ahead_steps == 0.0) narrowToPicks(s.vert_lanes, at_v, s.picked.data(), n_picked, sensors, lo, hi, n_lo, n_hi);
     const auto at_t = static_cast<std::size_t>(ct.triangles_at);
 #if defined(PSC_HAVE_AVX2_PATH)
-    if (avx2 && !self)
-      keepAvx2(s.tri_lanes, at_t, nt, lo, hi, n_lo, n_hi, kept);
+    if (avx2)
+      keepAvx2(s.tri_lanes, at_t, nt, lo, hi, n_lo, n_hi, self, kept);
     else
 #endif
       keepScalar(s.tri_lanes, at_t, 0, nt, lo, hi, n_lo, n_hi, self, kept);
     if (kept.size() == 0) return;
     padded = kept.size();
 #if defined(PSC_HAVE_AVX2_PATH)
-    if (avx2 && !self) padded = kept.pad();
+    if (avx2) padded = kept.pad();
 #endif
     if (s.hits.size() < nt) s.hits.resize(nt);
   }
@@ -1382,6 +1432,11 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     }
     Index* hits = s.hits.data();
     std::size_t n_hits = 0;
+#if defined(PSC_HAVE_AVX2_PATH)
+    if (self && avx2)
+      n_hits = collectSelfMeetsAvx2(kept, padded, pr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, hits);
+    else
+#endif
     if (self)
       n_hits = collectMeets<true>(kept, pr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, s.kept.meets.data(), hits);
 #if defined(PSC_HAVE_AVX2_PATH)

@@ -3,6 +3,8 @@
 // come out, except those the exclusion rule names (the triangle holds the vertex, or the two were
 // within self_rest_exclusion × R in the rest shape). Checked against brute force over every pair
 // of the body, and R against its closed form on a grid cloth.
+#include "../../src/bounds.h"
+
 #include "psc/error.h"
 #include "psc/shapes.h"
 #include "psc/world.h"
@@ -396,6 +398,42 @@ TEST(SelfCollision, NeedsTheDefaultOrBoundsModeAndValidSettings) {
     } catch (const Error& e) {
       EXPECT_NE(std::string(e.what()).find("self_radius_edges"), std::string::npos) << e.what();
     }
+  }
+}
+
+// The self pass's two probe paths, AVX2 (four boxes at a time, where the processor has it) and
+// SSE2 (two), give the same self candidates in the same order after the same probes: a cloth
+// folding in steps until its layers touch, with the rest-shape bound on and off.
+TEST(SelfCollision, Avx2AndSse2GiveTheSameSelfCandidates) {
+  if (!detail::avx2ProbesAvailable()) GTEST_SKIP() << "no AVX2 on this processor: only the SSE2 path runs";
+  TriMesh cloth = makePatch(2.0, 1.0, 41, 21);
+  const std::vector<Vec3> rest = cloth.vertices;
+  const auto run = [&](bool avx2, bool rest_bound) {
+    detail::allowAvx2Probes(avx2);
+    SensorSettings settings;
+    settings.self_rest_bound = rest_bound;
+    SensorWorld w(settings);
+    TriMesh mesh = cloth;
+    const BodyId id = w.addBody(selfColliding(mesh, 0.01));
+    std::vector<CandidatePair> candidates;
+    std::size_t probes = 0;
+    for (double rho : {0.3, 0.1, 0.04, 0.02, 0.012}) {
+      mesh.vertices = folded(rest, 0.1, rho);
+      w.setPositions(id, PositionView::of(mesh.vertices));
+      const StepResult& r = w.step();
+      candidates.insert(candidates.end(), r.candidates.begin(), r.candidates.end());
+      probes += r.stats.candidate_probes;
+    }
+    detail::allowAvx2Probes(true);
+    return std::make_pair(candidates, probes);
+  };
+  for (bool rest_bound : {true, false}) {
+    const auto [wide, wide_probes] = run(true, rest_bound);
+    const auto [narrow, narrow_probes] = run(false, rest_bound);
+    EXPECT_GT(wide.size(), 500u) << "the layers must touch";
+    EXPECT_GT(wide_probes, wide.size());
+    EXPECT_EQ(wide_probes, narrow_probes);
+    EXPECT_TRUE(wide == narrow) << wide.size() << " against " << narrow.size();
   }
 }
 
