@@ -3,6 +3,7 @@
 #include "psc/error.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -974,12 +975,18 @@ std::size_t collectMeets(const KeptTriangles& kept, const Probe& pr, double n_lo
 }
 
 #if defined(PSC_HAVE_AVX2_PATH)
+/// Per four-lane mask, the passing lanes first in order (the rest of each row: lane 0, harmless,
+/// overwritten or past the count).
+constexpr std::array<std::array<std::uint8_t, 4>, 16> kLeftPack = {{
+    {0, 0, 0, 0}, {0, 0, 0, 0}, {1, 0, 0, 0}, {0, 1, 0, 0}, {2, 0, 0, 0}, {0, 2, 0, 0}, {1, 2, 0, 0}, {0, 1, 2, 0},
+    {3, 0, 0, 0}, {0, 3, 0, 0}, {1, 3, 0, 0}, {0, 1, 3, 0}, {2, 3, 0, 0}, {0, 2, 3, 0}, {1, 2, 3, 0}, {0, 1, 2, 3}}};
+
 /// collectMeets<false> four triangles per instruction, for processors with AVX2 (chosen at run
 /// time). The same operations in the same order as the SSE2 loop, without fused multiply-adds, so
 /// the same triangles pass.
 /// `padded`: KeptTriangles::pad()'s size (the loop then has no tail), or kept.size().
 [[gnu::target("avx2")]] std::size_t collectMeetsAvx2(const KeptTriangles& kept, std::size_t padded, const Probe& pr,
-                                                     double n_lo, double n_hi, unsigned char* meets, Index* hits) {
+                                                     double n_lo, double n_hi, Index* hits) {
   const std::size_t m = kept.size();
   const double r2 = pr.r * pr.r;
   const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
@@ -989,8 +996,8 @@ std::size_t collectMeets(const KeptTriangles& kept, const Probe& pr, double n_lo
   const __m256d hix = _mm256_set1_pd(pr.hi.x()), hiy = _mm256_set1_pd(pr.hi.y()), hiz = _mm256_set1_pd(pr.hi.z());
   const __m256d vr2 = _mm256_set1_pd(r2);
   const __m256d vnl = _mm256_set1_pd(n_lo), vnh = _mm256_set1_pd(n_hi), zero = _mm256_setzero_pd();
-  std::size_t j = 0;
-  int any = 0;
+  const Index* record = kept.record.data();
+  std::size_t j = 0, n_hits = 0;
   for (; j + 4 <= padded; j += 4) {
     const __m256d dx = _mm256_max_pd(
         zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lx + j), hix), _mm256_sub_pd(lox, _mm256_loadu_pd(hx + j))));
@@ -1005,11 +1012,13 @@ std::size_t collectMeets(const KeptTriangles& kept, const Probe& pr, double n_lo
         _mm256_and_pd(_mm256_cmp_pd(vnh, _mm256_loadu_pd(tnl + j), _CMP_GE_OQ),
                       _mm256_cmp_pd(vnl, _mm256_loadu_pd(tnh + j), _CMP_LE_OQ)));
     const int mask = _mm256_movemask_pd(ok);
-    any |= mask;
-    meets[j] = static_cast<unsigned char>(mask & 1);
-    meets[j + 1] = static_cast<unsigned char>((mask >> 1) & 1);
-    meets[j + 2] = static_cast<unsigned char>((mask >> 2) & 1);
-    meets[j + 3] = static_cast<unsigned char>(mask >> 3);
+    // Left-packed without a branch: the four slots are written, the count moves by the passes.
+    const std::array<std::uint8_t, 4>& lanes = kLeftPack[mask];
+    hits[n_hits] = record[j + lanes[0]];
+    hits[n_hits + 1] = record[j + lanes[1]];
+    hits[n_hits + 2] = record[j + lanes[2]];
+    hits[n_hits + 3] = record[j + lanes[3]];
+    n_hits += static_cast<std::size_t>(__builtin_popcount(static_cast<unsigned>(mask)));
   }
   // Leave the upper halves clean before the scalar tail and the return. GCC 12 inserts no
   // vzeroupper on the path through the tail's calls (meetsScalar is SSE code), so every function
@@ -1018,11 +1027,10 @@ std::size_t collectMeets(const KeptTriangles& kept, const Probe& pr, double n_lo
   // clean, 0.78 ms without).
   _mm256_zeroupper();
   for (; j < m; ++j) {
-    const bool ok = meetsScalar(kept, j, pr, n_lo, n_hi);
-    any |= static_cast<int>(ok);
-    meets[j] = ok;
+    hits[n_hits] = record[j];
+    n_hits += static_cast<std::size_t>(meetsScalar(kept, j, pr, n_lo, n_hi));
   }
-  return any == 0 ? 0 : gatherMarked(kept, meets, hits);
+  return n_hits;
 }
 #endif
 
@@ -1400,7 +1408,7 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
 #if defined(PSC_HAVE_AVX2_PATH)
     if (avx2) padded = kept.pad();
 #endif
-    if (s.hits.size() < nt) s.hits.resize(nt);
+    if (s.hits.size() < nt + 3) s.hits.resize(nt + 3);  // collectMeetsAvx2 writes four slots at a time
   }
   for (std::size_t pick = 0; pick < n_picked; ++pick) {
     const VertexRec& vr = recs[s.picked[pick]];
@@ -1441,7 +1449,7 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       n_hits = collectMeets<true>(kept, pr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, s.kept.meets.data(), hits);
 #if defined(PSC_HAVE_AVX2_PATH)
     else if (avx2)
-      n_hits = collectMeetsAvx2(kept, padded, pr, n_lo, n_hi, s.kept.meets.data(), hits);
+      n_hits = collectMeetsAvx2(kept, padded, pr, n_lo, n_hi, hits);
 #endif
     else
       n_hits = collectMeets<false>(kept, pr, n_lo, n_hi, Vec3::Zero(), 0.0, s.kept.meets.data(), hits);
