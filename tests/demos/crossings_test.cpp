@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -312,6 +313,213 @@ TEST(Grid, EqualsBruteForceOnTwoSpheresPushedTogether) {
   const std::size_t tunnelled = counter.tunnelledVertices(meshes, before, after, {});
   EXPECT_EQ(tunnelled, tunnelledVerticesBruteForce(meshes, before, after, {}));
   EXPECT_GT(tunnelled, 10u);
+}
+
+// --- the item grid: owned edges, near pairs from the topology, the others from the cells ---
+
+/// An n×m grid of quads in the (u, v) parameter square [0, 1]², two triangles each, mapped to 3D
+/// by `at`.
+template <class At>
+void gridSheet(int n, int m, At at, std::vector<Vec3>& x, std::vector<Triangle>& tris) {
+  const auto first = static_cast<Index>(x.size());
+  for (int i = 0; i <= n; ++i)
+    for (int j = 0; j <= m; ++j) x.push_back(at(double(i) / n, double(j) / m));
+  const auto id = [&](int i, int j) { return first + static_cast<Index>(i * (m + 1) + j); };
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < m; ++j) {
+      tris.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+      tris.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+    }
+}
+
+TEST(SelfGrid, ASheetPiercedByAStripCrossesAKnownNumberOfTimes) {
+  // A square [0, 10]² in z = 0 (two triangles, diagonal x = y) and a strip of k quads in the plane
+  // y = 5.3, x in [0.5, 9.5], z in [−1, 1]: each of the strip's k + 1 upright edges and k diagonals
+  // passes through the square, and the square's diagonal through the strip (at x = 5.3, off its
+  // edges). 2k + 2 crossings, as one body or as two.
+  const int k = 6;
+  std::vector<Vec3> x = {{0, 0, 0}, {10, 0, 0}, {10, 10, 0}, {0, 10, 0}};
+  std::vector<Triangle> tris = {{0, 1, 2}, {0, 2, 3}};
+  gridSheet(k, 1, [](double u, double v) { return Vec3(0.5 + 9 * u, 5.3, -1 + 2 * v); }, x, tris);
+  CrossingCounter counter;
+  const std::vector<CrossingMesh> one = {crossingMesh(tris)};
+  EXPECT_EQ(counter.selfEdgeCrossings(one, {x}), std::size_t(2 * k + 2));
+  EXPECT_EQ(selfEdgeCrossingsBruteForce(one, {x}), std::size_t(2 * k + 2));
+  // The same two as bodies of their own: between bodies now, none within either.
+  std::vector<Triangle> strip(tris.begin() + 2, tris.end());
+  for (Triangle& t : strip)
+    for (Index& v : t) v -= 4;
+  const std::vector<CrossingMesh> two = {crossingMesh({{0, 1, 2}, {0, 2, 3}}), crossingMesh(strip)};
+  const BodyPositions x2 = {{x.begin(), x.begin() + 4}, {x.begin() + 4, x.end()}};
+  EXPECT_EQ(counter.edgeCrossings(two, x2), std::size_t(2 * k + 2));
+  EXPECT_EQ(edgeCrossingsBruteForce(two, x2), std::size_t(2 * k + 2));
+  EXPECT_EQ(counter.selfEdgeCrossings(two, x2), 0u);
+}
+
+TEST(SelfGrid, AStripFoldedBackThroughItselfEqualsBruteForce) {
+  // A strip along x folded back at x = 2 over its first half, the returning half twisted about its
+  // midline so that it passes through the first half along y = 0.5; near the fold the two halves
+  // all but touch.
+  for (int n : {8, 20, 41}) {
+    std::vector<Vec3> x;
+    std::vector<Triangle> tris;
+    gridSheet(2 * n, n / 2 + 1,
+              [](double u, double v) {
+                const double s = 4 * u;
+                return s <= 2 ? Vec3(s, v, 0) : Vec3(4 - s, v, (s - 2) * 0.5 * (v - 0.5));
+              },
+              x, tris);
+    const std::vector<CrossingMesh> one = {crossingMesh(tris)};
+    CrossingCounter counter;
+    const std::size_t brute = selfEdgeCrossingsBruteForce(one, {x});
+    EXPECT_EQ(counter.selfEdgeCrossings(one, {x}), brute) << n;
+    EXPECT_GT(brute, std::size_t(n)) << n;
+  }
+}
+
+TEST(SelfGrid, CoordinatesOnALatticeEqualBruteForce) {
+  // Vertices snapped to multiples of 1/8: boxes that touch exactly, share faces and sit on cell
+  // boundaries, coplanar triangles and edges through vertices and edges, degenerate triangles.
+  CrossingCounter counter;
+  std::size_t seen = 0;
+  for (std::uint64_t seed = 1; seed <= 10; ++seed) {
+    RandomBodies r = randomBodies(seed, 3, 0.3, 0.1);
+    for (auto& xb : r.after)
+      for (Vec3& p : xb) p = (p * 8).array().round().matrix() / 8;
+    const auto [meshes, x] = asOneBody(r, r.after);
+    const std::size_t brute = selfEdgeCrossingsBruteForce(meshes, x);
+    EXPECT_EQ(counter.selfEdgeCrossings(meshes, x), brute) << "seed " << seed;
+    EXPECT_EQ(counter.selfEdgeCrossings(r.meshes, r.after), selfEdgeCrossingsBruteForce(r.meshes, r.after))
+        << "seed " << seed;
+    seen += brute;
+  }
+  EXPECT_GT(seen, 20u);
+}
+
+TEST(SelfGrid, SmallTrianglesFarFromTheOriginEqualBruteForce) {
+  // Float boxes round outwards by about 1e-7 of a coordinate: here that is 1e-4 of a triangle.
+  CrossingCounter counter;
+  for (const double offset : {1e3, -3e4, 1e5}) {
+    RandomBodies r = randomBodies(7, 3, 0.3, 0.1);
+    for (auto& xb : r.after)
+      for (Vec3& p : xb) p = Vec3::Constant(offset) + 0.01 * p;
+    const auto [meshes, x] = asOneBody(r, r.after);
+    const std::size_t brute = selfEdgeCrossingsBruteForce(meshes, x);
+    EXPECT_EQ(counter.selfEdgeCrossings(meshes, x), brute) << offset;
+    EXPECT_GT(brute, 0u) << offset;
+  }
+}
+
+TEST(SelfGrid, NonFiniteVerticesLeaveTheirTrianglesOutButNotTheirOtherEdges) {
+  // Triangle (3, 4, 5)'s edge (3, 4) passes through triangle (0, 1, 2); vertex 5 is not finite,
+  // so that triangle and its two edges at 5 count for nothing, but edge (3, 4), which it owns,
+  // still crosses.
+  const std::vector<CrossingMesh> one = {crossingMesh({{0, 1, 2}, {3, 4, 5}})};
+  CrossingCounter counter;
+  for (const double bad : {std::nan(""), double(INFINITY), -double(INFINITY)}) {
+    const BodyPositions x = {{kA, {2, 0, 0}, {0, 2, 0}, {0.3, 0.3, -1}, {0.3, 0.3, 1}, {bad, 0.3, 0}}};
+    EXPECT_EQ(counter.selfEdgeCrossings(one, x), 1u) << bad;
+    EXPECT_EQ(selfEdgeCrossingsBruteForce(one, x), 1u) << bad;
+  }
+  // Random folded bodies with some vertices made non-finite: each leaves its triangles out (and
+  // hands their other edges to the grid as lone edges). Brute force never counts a NaN, but may
+  // count an infinity: it gets NaN for both.
+  std::mt19937_64 rng(5);
+  std::size_t seen = 0;
+  for (std::uint64_t seed = 1; seed <= 8; ++seed) {
+    const RandomBodies r = randomBodies(seed, 3, 0.3, 0.1);
+    auto [meshes, x] = asOneBody(r, r.after);
+    BodyPositions x_nan = x;
+    std::uniform_int_distribution<std::size_t> pick(0, x[0].size() - 1);
+    for (int i = 0; i < 6; ++i) {
+      const std::size_t v = pick(rng);
+      const auto k = static_cast<Eigen::Index>(i % 3);
+      x[0][v][k] = i % 2 ? std::nan("") : (i % 4 ? INFINITY : -INFINITY);
+      x_nan[0][v][k] = std::nan("");
+    }
+    const std::size_t brute = selfEdgeCrossingsBruteForce(meshes, x_nan);
+    EXPECT_EQ(counter.selfEdgeCrossings(meshes, x), brute) << "seed " << seed;
+    EXPECT_EQ(counter.selfEdgeCrossings(meshes, x_nan), brute) << "seed " << seed;
+    seen += brute;
+  }
+  EXPECT_GT(seen, 20u);
+  // All of a body's vertices but one not finite: nothing, and no trouble.
+  BodyPositions all_bad = {std::vector<Vec3>(5, Vec3::Constant(std::nan("")))};
+  all_bad[0][0] = kA;
+  EXPECT_EQ(counter.selfEdgeCrossings({crossingMesh({{0, 1, 2}, {0, 3, 4}})}, all_bad), 0u);
+}
+
+TEST(SelfGrid, EdgesOutsideTheTrianglesAreCountedAsGiven) {
+  // CrossingMesh's edges are meshEdges' unless someone writes them: an edge in no triangle, one
+  // written larger vertex first and one repeated are each tested as they are, like brute force.
+  // Triangle (0, 1, 2) is pierced by the segments 3-4 and 5-6, which are in no triangle.
+  CrossingMesh mesh = crossingMesh({{0, 1, 2}, {3, 7, 8}});
+  mesh.edges.push_back({5, 6});  // in no triangle
+  mesh.edges.push_back({4, 3});  // (3, 4) larger first, in no triangle
+  mesh.edges.push_back({0, 1});  // repeated: owned by no triangle, as (0, 1) is taken
+  const BodyPositions x = {{kA, {2, 0, 0}, {0, 2, 0}, {0.3, 0.3, -1}, {0.3, 0.3, 1}, {0.4, 0.2, 1}, {0.4, 0.2, -1},
+                            {5, 5, 5}, {6, 5, 5}}};
+  CrossingCounter counter;
+  const std::size_t brute = selfEdgeCrossingsBruteForce({mesh}, x);
+  EXPECT_EQ(brute, 2u);
+  EXPECT_EQ(counter.selfEdgeCrossings({mesh}, x), brute);
+  // The same with a non-finite vertex elsewhere (triangle (3, 7, 8) is left out): they still count.
+  BodyPositions bad = x;
+  bad[0][8] = Vec3::Constant(std::nan(""));
+  EXPECT_EQ(selfEdgeCrossingsBruteForce({mesh}, bad), 2u);
+  EXPECT_EQ(counter.selfEdgeCrossings({mesh}, bad), 2u);
+}
+
+TEST(SelfGrid, ManyBodiesEqualBruteForce) {
+  // Twelve bumpy patches in a pile: each alone (several per call) and between each other, then
+  // all as one body.
+  const RandomBodies r = randomBodies(11, 12, 0.4, 0.1);
+  CrossingCounter counter;
+  EXPECT_EQ(counter.selfEdgeCrossings(r.meshes, r.after), selfEdgeCrossingsBruteForce(r.meshes, r.after));
+  const std::size_t between = edgeCrossingsBruteForce(r.meshes, r.after);
+  EXPECT_EQ(counter.edgeCrossings(r.meshes, r.after), between);
+  EXPECT_GT(between, 100u);
+  const auto [meshes, x] = asOneBody(r, r.after);
+  const std::size_t brute = selfEdgeCrossingsBruteForce(meshes, x);
+  EXPECT_EQ(counter.selfEdgeCrossings(meshes, x), brute);
+  EXPECT_GT(brute, 100u);
+}
+
+TEST(SelfGrid, OneCounterAcrossStepsAndMeshes) {
+  // The counter keeps each body's topology while its mesh stays the same: positions that change
+  // from call to call, a different set of meshes, a body's mesh changed in place (same sizes) and
+  // the first set again must all be counted afresh.
+  CrossingCounter counter;
+  const RandomBodies a = randomBodies(3, 3, 0.3, 0.4);
+  const RandomBodies b = randomBodies(6, 4, 0.3, 0.4);
+  const auto check = [&](const std::vector<CrossingMesh>& meshes, const BodyPositions& x, const char* what) {
+    EXPECT_EQ(counter.selfEdgeCrossings(meshes, x), selfEdgeCrossingsBruteForce(meshes, x)) << what;
+  };
+  const auto [one_a, before_a] = asOneBody(a, a.before);
+  const auto [one_a_after, after_a] = asOneBody(a, a.after);
+  check(one_a, before_a, "a before");
+  check(one_a, after_a, "a after");
+  check(b.meshes, b.after, "b, four bodies");
+  check(a.meshes, a.after, "a, three bodies");
+  // Body 0's triangles reordered and turned inside out: the same triangles, counted the same.
+  std::vector<CrossingMesh> changed = a.meshes;
+  std::rotate(changed[0].triangles.begin(), changed[0].triangles.begin() + 1, changed[0].triangles.end());
+  for (Triangle& t : changed[0].triangles) std::swap(t[1], t[2]);
+  changed[0] = crossingMesh(changed[0].triangles);
+  check(changed, a.after, "a, body 0 reordered");
+  // Body 0's mesh replaced in place by one of the same sizes on other vertices (each index moved
+  // on by seven): a topology made for the old one would count other pairs.
+  const auto vertex_count = static_cast<Index>(a.after[0].size());
+  for (Triangle& t : changed[0].triangles)
+    for (Index& v : t) v = (v + 7) % vertex_count;
+  changed[0] = crossingMesh(changed[0].triangles);
+  ASSERT_EQ(changed[0].triangles.size(), a.meshes[0].triangles.size());
+  ASSERT_EQ(changed[0].edges.size(), a.meshes[0].edges.size());
+  check(changed, a.after, "a, body 0 on other vertices");
+  EXPECT_NE(selfEdgeCrossingsBruteForce(changed, a.after), selfEdgeCrossingsBruteForce(a.meshes, a.after));
+  // One body made of all of a's, then back to a.
+  check(one_a, after_a, "a as one body again");
+  check(a.meshes, a.before, "a, three bodies again");
 }
 
 }  // namespace
