@@ -179,12 +179,12 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
       hook.own(v, c, Vec3(x, y, z), nullptr);
     }
     sum += s;
-    for (Index f : ch.foreign_of.row(static_cast<Index>(v))) {
+    ch.foreign.forEach(static_cast<Index>(v), [&](Index f) {
       MotionBox& fb = boxes[f];
       fb.lo = fb.lo.cwiseMin(q_lo);
       fb.hi = fb.hi.cwiseMax(q_hi);
       hook.foreign(v, f, Vec3(x, y, z));
-    }
+    });
   }
 }
 
@@ -199,9 +199,14 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
 /// upper box's fourth lane and one prefetch for Bullet's node (m_x and m_q share a cache line)
 /// (psc_demo --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors
 /// --truth none, refit_ms_mean, two or three alternating runs each).
+/// `Slot`: the type of ChunkLists::foreign's slots (its slotWidth() bytes). Each vertex updates the
+/// boxes of its two slots without a branch; an empty slot names the box past the last chunk, which
+/// is thrown away.
+template <typename Slot>
 void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev,
                       std::size_t prev_stride, std::vector<MotionBox>& boxes, double& sum) {
   const std::size_t n = ch.chunk_of.size(), chunks = ch.count();
+  const std::uint8_t* slots = ch.foreign.slotData();
   // Per chunk, lo = (x, y, z, 0) and hi = (x, y, z, squared motion of its own vertices).
   // __m128's alignment attribute is not part of the vector's type: its allocator aligns by alignof.
 #pragma GCC diagnostic push
@@ -209,7 +214,7 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
   thread_local std::vector<std::array<__m128, 2>> box;
 #pragma GCC diagnostic pop
   const float inf = std::numeric_limits<float>::infinity();
-  box.assign(chunks, {_mm_set1_ps(inf), _mm_setr_ps(-inf, -inf, -inf, 0.0f)});
+  box.assign(chunks + 1, {_mm_set1_ps(inf), _mm_setr_ps(-inf, -inf, -inf, 0.0f)});
   // The same stride and records less than a cache line apart: one prefetch brings both.
   const auto address = [](const char* at) { return reinterpret_cast<std::uintptr_t>(at); };
   const bool prev_apart = prev != nullptr && (prev_stride != stride || (address(prev) > address(base)
@@ -245,10 +250,19 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
     }
     box[c][0] = _mm_min_ps(box[c][0], xv);
     box[c][1] = _mm_max_ps(box[c][1], xm);
-    for (Index f : ch.foreign_of.row(static_cast<Index>(v))) {
-      box[f][0] = _mm_min_ps(box[f][0], xv);
-      box[f][1] = _mm_max_ps(box[f][1], xv);  // lane 3: 0, the motion stays the own vertices'
-    }
+    Slot f[2];
+    std::memcpy(f, slots + 2 * sizeof(Slot) * v, sizeof f);
+    box[f[0]][0] = _mm_min_ps(box[f[0]][0], xv);
+    box[f[0]][1] = _mm_max_ps(box[f[0]][1], xv);  // lane 3: 0, the motion stays the own vertices'
+    box[f[1]][0] = _mm_min_ps(box[f[1]][0], xv);
+    box[f[1]][1] = _mm_max_ps(box[f[1]][1], xv);
+  }
+  // The rare third and later foreign chunks of a vertex.
+  for (const auto& [v, f] : ch.foreign.extra()) {
+    const float* p = reinterpret_cast<const float*>(base + std::size_t{v} * stride);
+    const __m128 xv = _mm_movelh_ps(load2(p), _mm_load_ss(p + 2));
+    box[f][0] = _mm_min_ps(box[f][0], xv);
+    box[f][1] = _mm_max_ps(box[f][1], xv);
   }
   // A NaN coordinate, or an infinite one (in a box or, through the motion, in the previous
   // positions), makes the sum non-finite: the caller then names it.
@@ -452,9 +466,14 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
     if (b.rest_fit) b.rest_fit->filled = false;
     NoRestFit none;
 #if defined(__SSE2__)
-    if (is_float && !swept && cf == nullptr)
-      streamBoxesFloat(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
-    else
+    if (is_float && !swept && cf == nullptr) {
+      if (ch.foreign.slotWidth() == 1)
+        streamBoxesFloat<std::uint8_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
+      else if (ch.foreign.slotWidth() == 2)
+        streamBoxesFloat<std::uint16_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
+      else
+        streamBoxesFloat<std::uint32_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
+    } else
 #endif
     if (is_float)
       streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, none, cf);
@@ -477,7 +496,7 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
         b.chunk_box[c].hi = b.chunk_box[c].hi.cwiseMax(q);
       };
       add(ch.chunk_of[v]);
-      for (Index f : ch.foreign_of.row(static_cast<Index>(v))) add(f);
+      ch.foreign.forEach(static_cast<Index>(v), add);
     }
     finite = finite && std::isfinite(sum);
   } else if (!same_type) {

@@ -68,6 +68,19 @@ void splitChunks(std::vector<Index>& ids, std::size_t begin, std::size_t end, st
 
 }  // namespace
 
+ForeignChunks::ForeignChunks(std::size_t vertices, Index chunks, const std::vector<std::pair<Index, Index>>& pairs)
+    : slots_(2 * vertices, chunks), none_(chunks), count_(vertices) {
+  // Sorted and unique per vertex, like IndexRows::fromPairs.
+  const IndexRows rows = IndexRows::fromPairs(vertices, pairs);
+  for (std::size_t v = 0; v < vertices; ++v) {
+    const IndexRange row = rows.row(v);
+    slots_.set(2 * v, row.size() > 0 ? row[0] : chunks);
+    slots_.set(2 * v + 1, row.size() > 1 ? row[1] : chunks);
+    for (std::size_t k = 2; k < row.size(); ++k) extra_.emplace_back(static_cast<Index>(v), row[k]);
+  }
+  extra_.shrink_to_fit();
+}
+
 ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positions,
                        const std::vector<Index>& region_of, std::size_t regions, std::size_t chunk_vertices) {
   ChunkLists out;
@@ -110,7 +123,7 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
       if (chunk_of[v] != owner) bpairs.emplace_back(v, owner);
   }
   out.chunk_of = std::move(chunk_of);
-  out.foreign_of = IndexRows::fromPairs(topology.vertexCount(), bpairs);
+  out.foreign = ForeignChunks(topology.vertexCount(), chunk, bpairs);
   // Each chunk's table: its own vertices, then the foreign ones its triangles use.
   for (auto& [v, c] : bpairs) std::swap(v, c);
   const IndexRows own = IndexRows::fromPairs(chunk, vpairs);

@@ -1,0 +1,155 @@
+// The chunk lists under the regions (src/body.h): each vertex's foreign chunks, the chunks other
+// than its own whose owned triangles hold it, kept in two slots and a list of the rare rest.
+#include "../../src/body.h"
+#include "../../src/bounds.h"
+
+#include "psc/mesh.h"
+#include "psc/shapes.h"
+
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <iostream>
+#include <random>
+#include <set>
+#include <utility>
+#include <vector>
+
+namespace psc::detail {
+namespace {
+
+std::vector<Index> foreignOf(const ForeignChunks& f, Index v) {
+  std::vector<Index> out;
+  f.forEach(v, [&](Index c) { out.push_back(c); });
+  return out;
+}
+
+// Seeded random (vertex, chunk) pairs, duplicates included, with up to six chunks per vertex and
+// chunk counts that need one, two and four bytes a slot: the slots and the rest give each vertex
+// its chunks ascending and once, like IndexRows::fromPairs.
+TEST(ForeignChunks, EqualTheRowsOfThePairsForEverySlotWidth) {
+  std::mt19937 rng(7);
+  for (const Index chunks : {Index{200}, Index{1000}, Index{70000}}) {
+    const std::size_t vertices = 3000;
+    std::vector<std::pair<Index, Index>> pairs;
+    std::uniform_int_distribution<Index> chunk(0, chunks - 1);
+    std::uniform_int_distribution<int> count(0, 6);
+    for (Index v = 0; v < vertices; ++v) {
+      const int k = count(rng);
+      for (int i = 0; i < k; ++i) {
+        pairs.emplace_back(v, chunk(rng));
+        if (i == 0 && v % 7 == 0) pairs.push_back(pairs.back());  // a duplicate
+      }
+    }
+    std::shuffle(pairs.begin(), pairs.end(), rng);
+    const ForeignChunks f(vertices, chunks, pairs);
+    const IndexRows rows = IndexRows::fromPairs(vertices, pairs);
+    EXPECT_EQ(f.none(), chunks);
+    EXPECT_EQ(f.slotWidth(), chunks < 256 ? 1u : chunks < 65536 ? 2u : 4u);
+    std::size_t extra = 0, with_three = 0;
+    for (Index v = 0; v < vertices; ++v) {
+      const IndexRange row = rows.row(v);
+      const std::vector<Index> expected(row.begin(), row.end());
+      ASSERT_EQ(foreignOf(f, v), expected) << "vertex " << v << " of " << chunks << " chunks";
+      EXPECT_EQ(f.first(v), expected.size() > 0 ? expected[0] : chunks);
+      EXPECT_EQ(f.second(v), expected.size() > 1 ? expected[1] : chunks);
+      extra += expected.size() > 2 ? expected.size() - 2 : 0;
+      with_three += expected.size() > 2;
+    }
+    EXPECT_GT(with_three, 100u);
+    EXPECT_EQ(f.extra().size(), extra);
+    EXPECT_TRUE(std::is_sorted(f.extra().begin(), f.extra().end()));
+  }
+}
+
+// On a real mesh cut into chunks, every corner of a chunk's owned triangle is the chunk's own
+// vertex or has the chunk among its foreign chunks (what the refit needs to put it in the chunk's
+// box), and no vertex lists its own chunk or a chunk whose triangles do not hold it.
+TEST(ForeignChunks, HoldEveryCornerOfTheChunksOwnedTrianglesOnATorus) {
+  const TriMesh m = makeTorus(1.0, 0.3, 5000);
+  const MeshTopology topo(m.triangles, m.vertices.size());
+  std::vector<Index> region_of(m.vertices.size());
+  for (std::size_t v = 0; v < m.vertices.size(); ++v) region_of[v] = m.vertices[v].x() < 0.0 ? 0 : 1;
+  const ChunkLists ch = buildChunks(topo, PositionView::of(m.vertices), region_of, 2, 32);
+  std::vector<std::set<Index>> expected(m.vertices.size());
+  for (Index c = 0; c < ch.count(); ++c)
+    for (std::size_t k = ch.triangle_begin[c]; k < ch.triangle_begin[c + 1]; ++k)
+      for (Index u : ch.triangle(c, k))
+        if (ch.chunk_of[u] != c) expected[u].insert(c);
+  std::size_t listed = 0, three = 0;
+  for (Index v = 0; v < m.vertices.size(); ++v) {
+    const std::vector<Index> got = foreignOf(ch.foreign, v);
+    EXPECT_EQ(std::set<Index>(got.begin(), got.end()), expected[v]) << "vertex " << v;
+    listed += got.size();
+    three += got.size() > 2;
+  }
+  EXPECT_GT(listed, m.vertices.size() / 3) << "chunks must share their borders";
+  std::cout << "[ foreign ] " << listed << " foreign entries over " << m.vertices.size() << " vertices, " << three
+            << " with more than two\n";
+}
+
+// The refit's boxes against brute force on a jittered torus in Bullet-like records (single
+// precision positions inside larger records, the previous ones beside them), in the fast
+// single-precision pass and the generic one (double positions; with --swept): every chunk's box
+// holds every corner of its owned triangles, its own vertices' previous positions with the swept
+// bound, and its motion is at least its own vertices' largest |x − x_prev|. Bodies with few and
+// with many chunks give the slots one and two bytes.
+TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
+  for (const std::size_t resolution : {2000u, 20000u}) {
+    const TriMesh m = makeTorus(1.0, 0.3, resolution);
+    const std::size_t n = m.vertices.size();
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> jitter(-0.02, 0.02);
+    // Per vertex (x, y, z, pad, qx, qy, qz, pad): the records of a Bullet-like node.
+    std::vector<std::array<float, 8>> f(n);
+    std::vector<Vec3> x(n), q(n);
+    for (std::size_t v = 0; v < n; ++v) {
+      x[v] = m.vertices[v] + Vec3(jitter(rng), jitter(rng), jitter(rng));
+      q[v] = x[v] + Vec3(jitter(rng), jitter(rng), jitter(rng));
+      f[v] = {float(x[v].x()), float(x[v].y()), float(x[v].z()), 0.f, float(q[v].x()), float(q[v].y()), float(q[v].z()), 0.f};
+    }
+    const MeshTopology topo(m.triangles, n);
+    std::vector<Index> region_of(n);
+    for (std::size_t v = 0; v < n; ++v) region_of[v] = m.vertices[v].x() < 0.0 ? 0 : 1;
+    for (const bool single : {true, false}) {
+      for (const bool swept : {false, true}) {
+        Body b;
+        if (single) {
+          b.positions = PositionView(f[0].data(), n, sizeof f[0]);
+          b.previous = PositionView(f[0].data() + 4, n, sizeof f[0]);
+        } else {
+          b.positions = PositionView::of(x);
+          b.previous = PositionView::of(q);
+        }
+        b.chunks = buildChunks(topo, b.positions, region_of, 2, 32);
+        b.particle_vertex = {0, 1};
+        refitBounds(b, false, swept);
+        const ChunkLists& ch = b.chunks;
+        ASSERT_EQ(b.chunk_box.size(), ch.count());
+        // The positions as the refit reads them (single precision values are exact in double).
+        const auto at = [&](Index u) { return b.positions[u]; };
+        const auto before = [&](Index u) { return b.previous[u]; };
+        EXPECT_EQ(ch.foreign.slotWidth(), ch.count() < 256 ? 1u : 2u);
+        std::size_t outside = 0, short_motion = 0;
+        const auto holds = [](const MotionBox& box, const Vec3& p) {
+          return (box.lo.array() <= p.array()).all() && (p.array() <= box.hi.array()).all();
+        };
+        for (Index c = 0; c < ch.count(); ++c) {
+          const MotionBox& box = b.chunk_box[c];
+          for (std::size_t k = ch.triangle_begin[c]; k < ch.triangle_begin[c + 1]; ++k)
+            for (Index u : ch.triangle(c, k)) outside += !holds(box, at(u)) + (swept && !holds(box, before(u)));
+          for (Index u : ch.vertices(c)) {
+            outside += !holds(box, at(u)) + (swept && !holds(box, before(u)));
+            if (!swept) short_motion += box.motion < (at(u) - before(u)).norm() * (1.0 - 1e-6);
+          }
+        }
+        EXPECT_EQ(outside, 0u) << resolution << (single ? " single" : " double") << (swept ? " swept" : "");
+        EXPECT_EQ(short_motion, 0u) << resolution << (single ? " single" : " double");
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace psc::detail
