@@ -53,6 +53,49 @@ double maxMargin(const std::vector<TruthBody>& bodies) {
   return m;
 }
 
+/// x rounded to a float ≤ x (floatDown) or ≥ x (floatUp), for boxes that must only grow.
+float floatDown(double x) {
+  constexpr float big = std::numeric_limits<float>::max();
+  if (x > big) return big;
+  if (!(x >= -big)) return -std::numeric_limits<float>::infinity();  // also NaN: never excludes
+  const float f = static_cast<float>(x);
+  return static_cast<double>(f) > x ? std::nextafter(f, -big) : f;
+}
+float floatUp(double x) {
+  constexpr float big = std::numeric_limits<float>::max();
+  if (x < -big) return -big;
+  if (!(x <= big)) return std::numeric_limits<float>::infinity();
+  const float f = static_cast<float>(x);
+  return static_cast<double>(f) < x ? std::nextafter(f, big) : f;
+}
+
+/// Whether the ray from p along +axis crosses triangle (c0, c1, c2), whose box the ray meets
+/// (spans p across the axis and reaches p along it). Both ray casts (TriangleGrid and
+/// RayColumns) count with this one function, so they agree bit for bit, ties included.
+bool rayCrosses(const Vec3& p, const Vec3& c0, const Vec3& c1, const Vec3& c2, int axis) {
+  const int u = (axis + 1) % 3, w = (axis + 2) % 3;
+  Vec3 v[3] = {c0, c1, c2};
+  double area = (v[1][u] - v[0][u]) * (v[2][w] - v[0][w]) - (v[1][w] - v[0][w]) * (v[2][u] - v[0][u]);
+  if (area == 0.0) return false;  // seen edge-on: the ray grazes it
+  if (area < 0.0) {
+    std::swap(v[1], v[2]);
+    area = -area;
+  }
+  // Edge functions with a tie rule that gives a point on a shared edge (or vertex) to exactly
+  // one of the triangles on either side, so a watertight surface is crossed once, not 0 or 2.
+  double e[3];
+  for (int j = 0; j < 3; ++j) {
+    const Vec3& a = v[j];
+    const Vec3& b = v[(j + 1) % 3];
+    const double du = b[u] - a[u], dw = b[w] - a[w];
+    e[j] = du * (p[w] - a[w]) - dw * (p[u] - a[u]);
+    if (e[j] < 0.0 || (e[j] == 0.0 && !(dw < 0.0 || (dw == 0.0 && du > 0.0)))) return false;
+  }
+  // e[k] is the weight of the vertex opposite edge k (edge k runs from v[k] to v[k+1]).
+  const double hit = (e[1] * v[0][axis] + e[2] * v[1][axis] + e[0] * v[2][axis]) / (e[0] + e[1] + e[2]);
+  return hit > p[axis];
+}
+
 }  // namespace
 
 const TruthContact* TruthResult::find(const ContactKey& key) const {
@@ -65,9 +108,14 @@ const TruthContact* TruthResult::find(const ContactKey& key) const {
 
 void TriangleGrid::build(const std::vector<TruthBody>& bodies, double cell) {
   bodies_ = &bodies;
+  std::size_t triangles = 0;
+  for (const TruthBody& body : bodies) triangles += body.triangles.size();
   tri_body_.clear();
   tri_local_.clear();
+  tri_body_.reserve(triangles);
+  tri_local_.reserve(triangles);
   std::vector<testkit::Box> boxes;
+  boxes.reserve(triangles);
   body_lo_.assign(bodies.size(), Vec3::Constant(std::numeric_limits<double>::infinity()));
   body_hi_.assign(bodies.size(), Vec3::Constant(-std::numeric_limits<double>::infinity()));
   double edge_sum = 0.0;
@@ -104,28 +152,7 @@ bool TriangleGrid::rayParityOdd(const Vec3& p, Index body, int axis) const {
         box.hi[w] < p[w])
       return;
     const Triangle& t = B.triangles[tri_local_[g]];
-    Vec3 v[3] = {B.x[t[0]], B.x[t[1]], B.x[t[2]]};
-    double area = (v[1][u] - v[0][u]) * (v[2][w] - v[0][w]) - (v[1][w] - v[0][w]) * (v[2][u] - v[0][u]);
-    if (area == 0.0) return;  // seen edge-on: the ray grazes it
-    if (area < 0.0) {
-      std::swap(v[1], v[2]);
-      area = -area;
-    }
-    // Edge functions with a tie rule that gives a point on a shared edge (or vertex) to exactly
-    // one of the triangles on either side, so a watertight surface is crossed once, not 0 or 2.
-    double e[3];
-    bool inside = true;
-    for (int j = 0; j < 3 && inside; ++j) {
-      const Vec3& a = v[j];
-      const Vec3& b = v[(j + 1) % 3];
-      const double du = b[u] - a[u], dw = b[w] - a[w];
-      e[j] = du * (p[w] - a[w]) - dw * (p[u] - a[u]);
-      if (e[j] < 0.0 || (e[j] == 0.0 && !(dw < 0.0 || (dw == 0.0 && du > 0.0)))) inside = false;
-    }
-    if (!inside) return;
-    // e[k] is the weight of the vertex opposite edge k (edge k runs from v[k] to v[k+1]).
-    const double hit = (e[1] * v[0][axis] + e[2] * v[1][axis] + e[0] * v[2][axis]) / (e[0] + e[1] + e[2]);
-    if (hit > p[axis]) odd = !odd;
+    if (rayCrosses(p, B.x[t[0]], B.x[t[1]], B.x[t[2]], axis)) odd = !odd;
   });
   return odd;
 }
@@ -143,6 +170,200 @@ double TriangleGrid::nearestDistance(const Vec3& p, Index body, double start) co
       best2 = std::min(best2, testkit::pointTriangleDistanceSquared(p, B.x[tri[0]], B.x[tri[1]], B.x[tri[2]]));
     });
     if (best2 <= R * R || R > limit) return std::sqrt(best2);
+  }
+}
+
+// --- penetration ---
+
+void RayColumns::build(const TruthBody& body, int axis) {
+  axis_ = axis;
+  const int u = (axis + 1) % 3, w = (axis + 2) % 3;
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  pending_.clear();
+  pending_.reserve(body.triangles.size());
+  double lo_u = inf, hi_u = -inf, lo_w = inf, hi_w = -inf, extent_sum = 0.0;
+  for (std::size_t t = 0; t < body.triangles.size(); ++t) {
+    const Triangle& tri = body.triangles[t];
+    const Vec3 &p0 = body.x[tri[0]], &p1 = body.x[tri[1]], &p2 = body.x[tri[2]];
+    // The box exactly as TriangleGrid::build makes it (and BoxGrid leaves out a NaN one).
+    const Vec3 tl = p0.cwiseMin(p1).cwiseMin(p2), th = p0.cwiseMax(p1).cwiseMax(p2);
+    if (tl.hasNaN() || th.hasNaN()) continue;
+    pending_.push_back({tl[u], th[u], tl[w], th[w], static_cast<Index>(t)});
+    lo_u = std::min(lo_u, tl[u]);
+    hi_u = std::max(hi_u, th[u]);
+    lo_w = std::min(lo_w, tl[w]);
+    hi_w = std::max(hi_w, th[w]);
+    extent_sum += (th[u] - tl[u]) + (th[w] - tl[w]);
+  }
+  if (pending_.empty()) {
+    nu_ = nw_ = 0;  // no ray crosses anything
+    return;
+  }
+  origin_u_ = lo_u;
+  origin_w_ = lo_w;
+  const double n = static_cast<double>(pending_.size());
+  const double extent_u = hi_u - lo_u, extent_w = hi_w - lo_w;
+  if (!std::isfinite(extent_u) || !std::isfinite(extent_w)) {
+    // Exploded coordinates: one cell holding everything is still exact.
+    cell_ = inv_cell_ = 1.0;
+    nu_ = nw_ = 1;
+  } else {
+    // Cells narrower than a triangle's box: a triangle goes into 1 to 4 of them, and a query's
+    // 2×2 cells hold few more triangles than the ones its ray meets. At most about two cells
+    // per triangle, so that a few huge triangles cannot blow the grid up.
+    cell_ = std::max(kCellPerBox * extent_sum / (2.0 * n), 1e-9 * std::max(extent_u, extent_w));
+    if (!(cell_ > 0.0)) cell_ = 1.0;  // every box a single point
+    for (;;) {
+      nu_ = static_cast<std::int64_t>(std::floor(extent_u / cell_)) + 1;
+      nw_ = static_cast<std::int64_t>(std::floor(extent_w / cell_)) + 1;
+      if (static_cast<double>(nu_) * static_cast<double>(nw_) <= 2.0 * n + 64.0) break;
+      cell_ *= 1.26;
+    }
+    inv_cell_ = 1.0 / cell_;
+  }
+  // Two passes, count then fill. A triangle over cells [i0, i1] × [j0, j1] goes into (i0, j0) and
+  // every other cell from there: of the 2×2 cells a query reads, (i−1..i) × (j−1..j), exactly
+  // one holds it whenever i0 ≤ i ≤ i1 and j0 ≤ j ≤ j1. The cell of a coordinate only grows with
+  // it, so the query's cell is within the range of every box that spans the query point.
+  offsets_.assign(static_cast<std::size_t>(nu_ * nw_) + 1, 0u);
+  for (const Pending& t : pending_) {
+    const std::int64_t i0 = cellU(t.lo_u), i1 = cellU(t.hi_u), j0 = cellW(t.lo_w), j1 = cellW(t.hi_w);
+    for (std::int64_t j = j0; j <= j1; j += 2)
+      for (std::int64_t i = i0; i <= i1; i += 2) ++offsets_[static_cast<std::size_t>(j * nu_ + i) + 1];
+  }
+  for (std::size_t c = 1; c < offsets_.size(); ++c) offsets_[c] += offsets_[c - 1];
+  // Grown, never shrunk nor zeroed: every slot up to offsets_.back() is written below.
+  if (items_.size() < offsets_.back()) items_.resize(offsets_.back());
+  if (corners_.size() < pending_.size()) corners_.resize(pending_.size());
+  fill_.assign(offsets_.begin(), offsets_.end() - 1);
+  for (std::size_t k = 0; k < pending_.size(); ++k) {
+    const Pending& t = pending_[k];
+    const Triangle& tri = body.triangles[t.triangle];
+    double* c = corners_[k].c;
+    for (int m = 0; m < 3; ++m) {
+      const Vec3& v = body.x[tri[m]];
+      c[3 * m] = v[u];
+      c[3 * m + 1] = v[w];
+      c[3 * m + 2] = v[axis];
+    }
+    const Item item{floatDown(t.lo_u), floatUp(t.hi_u), floatDown(t.lo_w), floatUp(t.hi_w),
+                    floatUp(std::max({c[2], c[5], c[8]})), static_cast<std::uint32_t>(k)};
+    const std::int64_t i0 = cellU(t.lo_u), i1 = cellU(t.hi_u), j0 = cellW(t.lo_w), j1 = cellW(t.hi_w);
+    for (std::int64_t j = j0; j <= j1; j += 2)
+      for (std::int64_t i = i0; i <= i1; i += 2) items_[fill_[static_cast<std::size_t>(j * nu_ + i)]++] = item;
+  }
+}
+
+std::int64_t RayColumns::cellU(double x) const {
+  const double t = (x - origin_u_) * inv_cell_;
+  if (!(t > 0.0)) return 0;
+  return t < static_cast<double>(nu_) ? static_cast<std::int64_t>(t) : nu_ - 1;
+}
+
+std::int64_t RayColumns::cellW(double x) const {
+  const double t = (x - origin_w_) * inv_cell_;
+  if (!(t > 0.0)) return 0;
+  return t < static_cast<double>(nw_) ? static_cast<std::int64_t>(t) : nw_ - 1;
+}
+
+bool RayColumns::parityOdd(const Vec3& p) const {
+  if (nu_ == 0 || p.hasNaN()) return false;  // a NaN is in no cell of TriangleGrid either
+  const int u = (axis_ + 1) % 3, w = (axis_ + 2) % 3;
+  // p in (u, w, axis) order, as the corners are stored: rayCrosses along +z then does on these
+  // numbers exactly what it does along +axis on the original ones.
+  const Vec3 q(p[u], p[w], p[axis_]);
+  const std::int64_t i = cellU(q[0]), j = cellW(q[1]);
+  const std::int64_t i_first = std::max<std::int64_t>(i - 1, 0);
+  bool odd = false;
+  for (std::int64_t jj = std::max<std::int64_t>(j - 1, 0); jj <= j; ++jj) {
+    // Cells (i−1, jj) and (i, jj) are neighbours in the CSR: one run of items.
+    const std::uint32_t first = offsets_[static_cast<std::size_t>(jj * nu_ + i_first)];
+    const std::uint32_t last = offsets_[static_cast<std::size_t>(jj * nu_ + i) + 1];
+    for (std::uint32_t k = first; k < last; ++k) {
+      const Item& it = items_[k];
+      // Five comparisons and one branch: most items fail, on no predictable one of them.
+      if (!((it.hi_a >= q[2]) & (it.lo_u <= q[0]) & (it.hi_u >= q[0]) & (it.lo_w <= q[1]) & (it.hi_w >= q[1])))
+        continue;
+      const double* c = corners_[it.corners].c;
+      // TriangleGrid::rayParityOdd's box test, on the same (exact) box.
+      if (std::max({c[2], c[5], c[8]}) < q[2] || std::min({c[0], c[3], c[6]}) > q[0] ||
+          std::max({c[0], c[3], c[6]}) < q[0] || std::min({c[1], c[4], c[7]}) > q[1] ||
+          std::max({c[1], c[4], c[7]}) < q[1])
+        continue;
+      if (rayCrosses(q, Vec3(c[0], c[1], c[2]), Vec3(c[3], c[4], c[5]), Vec3(c[6], c[7], c[8]), 2)) odd = !odd;
+    }
+  }
+  return odd;
+}
+
+bool TriangleGrid::PenetrationBody::deeperThan(const TruthBody& body, const Vec3& p, double strict, double& depth) {
+  if (!distance_built) {
+    distance_built = true;
+    std::vector<testkit::Box> boxes;
+    boxes.reserve(body.triangles.size());
+    visible_lo = Vec3::Constant(std::numeric_limits<double>::infinity());
+    visible_hi = -visible_lo;
+    any_visible = false;
+    double edge_sum = 0.0;
+    for (const Triangle& tri : body.triangles) {
+      const Vec3 &p0 = body.x[tri[0]], &p1 = body.x[tri[1]], &p2 = body.x[tri[2]];
+      const Vec3 tl = p0.cwiseMin(p1).cwiseMin(p2), th = p0.cwiseMax(p1).cwiseMax(p2);
+      boxes.push_back({tl, th});
+      edge_sum += (p1 - p0).norm() + (p2 - p1).norm() + (p0 - p2).norm();
+      if (tl.hasNaN() || th.hasNaN()) continue;  // in no cell of the grid
+      visible_lo = visible_lo.cwiseMin(tl);
+      visible_hi = visible_hi.cwiseMax(th);
+      any_visible = true;
+    }
+    distance.build(std::move(boxes), 3.0 * edge_sum / static_cast<double>(3 * std::max<std::size_t>(body.triangles.size(), 1)));
+  }
+  if (!any_visible) {
+    depth = std::numeric_limits<double>::infinity();  // what nearestDistance finds: nothing
+    return depth > strict;
+  }
+  const auto distance2 = [&](Index t) {
+    const Triangle& tri = body.triangles[t];
+    return testkit::pointTriangleDistanceSquared(p, body.x[tri[0]], body.x[tri[1]], body.x[tri[2]]);
+  };
+  const double R0 = std::max(strict, 1e-12);
+  if (R0 == strict) {
+    // Most vertices found inside lie within the margins (a contact being resolved). One triangle
+    // of the first cube (its box meets it) at distance ≤ R0 settles that: nearestDistance stops
+    // at that cube with a distance ≤ R0 = strict, so the vertex is not counted, and its depth is
+    // not needed. Look for one, cheaply: triangles whose box is farther than R0 cannot be it.
+    bool near = false;
+    distance.forEachInBox(p - Vec3::Constant(R0), p + Vec3::Constant(R0), [&](Index t) {
+      if (near) return;
+      const testkit::Box& box = distance.box(t);
+      double box2 = 0.0;
+      for (int k = 0; k < 3; ++k) {
+        const double gap = std::max({box.lo[k] - p[k], 0.0, p[k] - box.hi[k]});
+        box2 += gap * gap;
+      }
+      near = box2 <= R0 * R0 && distance2(t) <= R0 * R0;
+    });
+    if (near) {
+      depth = R0;
+      return false;
+    }
+  }
+  // TriangleGrid::nearestDistance's search: the same radii, and at each the same triangles (those
+  // whose box meets the cube), so the same minimum. It stops at its grid's far end; this one once
+  // the cube holds every box, where the minimum can no longer change: the same result. The
+  // triangles of the last cube are in the minimum already: not computed again.
+  double best2 = std::numeric_limits<double>::infinity();
+  testkit::Box last{Vec3::Constant(std::numeric_limits<double>::quiet_NaN()), Vec3::Zero()};  // meets nothing
+  for (double R = R0;; R *= 2.0) {
+    const Vec3 cube_lo = p - Vec3::Constant(R), cube_hi = p + Vec3::Constant(R);
+    distance.forEachInBox(cube_lo, cube_hi, [&](Index t) {
+      if (!distance.box(t).meets(last)) best2 = std::min(best2, distance2(t));
+    });
+    last = {cube_lo, cube_hi};
+    if (best2 <= R * R ||
+        ((cube_lo.array() <= visible_lo.array()).all() && (cube_hi.array() >= visible_hi.array()).all())) {
+      depth = std::sqrt(best2);
+      return depth > strict;
+    }
   }
 }
 
@@ -316,23 +537,80 @@ TruthResult groundTruthSelfBruteForce(const std::vector<TruthBody>& bodies, cons
 }
 
 Penetration measurePenetration(const std::vector<TruthBody>& bodies, TriangleGrid& grid) {
+  // The same vertices, rays and depths as casting TriangleGrid's rays over one grid of all bodies
+  // (rayParityOdd, nearestDistance), without that grid: a body pair whose boxes are apart costs
+  // one pass over the vertices, and a ray reads only its column of the one body it is cast
+  // against (RayColumns, built for a body when a vertex of another first lies in its box). The
+  // +y ray is cast only after an odd +x one, so its columns are built only for a body something
+  // seems to be inside.
   Penetration out;
-  grid.build(bodies);
-  for (std::size_t b = 0; b < bodies.size(); ++b) {
+  const std::size_t n = bodies.size();
+  auto& pen = grid.pen_;
+  pen.resize(n);
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  for (std::size_t b = 0; b < n; ++b) {
+    TriangleGrid::PenetrationBody& P = pen[b];
+    P.box_built = P.columns_built[0] = P.columns_built[1] = P.distance_built = false;
+    // The box of the vertices; a NaN coordinate is left out (such a vertex is in no cell of
+    // TriangleGrid, so never inside anything), but noted.
+    double lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};
+    bool nan = false;
+    for (const Vec3& p : bodies[b].x)
+      for (int k = 0; k < 3; ++k) {
+        nan = nan || std::isnan(p[k]);
+        if (p[k] < lo[k]) lo[k] = p[k];
+        if (p[k] > hi[k]) hi[k] = p[k];
+      }
+    P.vertex_lo = Vec3(lo[0], lo[1], lo[2]);
+    P.vertex_hi = Vec3(hi[0], hi[1], hi[2]);
+    P.vertex_nan = nan;
+  }
+  // Every vertex of A on the far side of a face of [lo, hi] (B's box) fails the test below. (A
+  // NaN bound compares false: no skip, as the test below skips nothing on it either.)
+  const auto apart = [](const TriangleGrid::PenetrationBody& A, const Vec3& lo, const Vec3& hi) {
+    bool out_of_box = false;
+    for (int k = 0; k < 3; ++k) out_of_box = out_of_box || A.vertex_hi[k] <= lo[k] || A.vertex_lo[k] >= hi[k];
+    return out_of_box;
+  };
+  for (std::size_t b = 0; b < n; ++b) {
     const TruthBody& B = bodies[b];
     if (!B.closed || B.triangles.empty()) continue;
-    const Vec3 &blo = grid.body_lo_[b], &bhi = grid.body_hi_[b];
-    for (std::size_t a = 0; a < bodies.size(); ++a) {
+    TriangleGrid::PenetrationBody& P = pen[b];
+    const auto parityOdd = [&](const Vec3& p, int axis) {
+      if (!P.columns_built[axis]) {
+        P.columns[axis].build(B, axis);
+        P.columns_built[axis] = true;
+      }
+      return P.columns[axis].parityOdd(p);
+    };
+    for (std::size_t a = 0; a < n; ++a) {
       if (a == b) continue;
+      // First against the box of all of B's vertices, which holds the box of its triangles
+      // (unless a NaN makes the latter's bounds a matter of Eigen's min and max).
+      if (!P.vertex_nan && apart(pen[a], P.vertex_lo, P.vertex_hi)) continue;
+      if (!P.box_built) {
+        // B's box exactly as TriangleGrid::build computes body_lo_ and body_hi_.
+        P.box_built = true;
+        Vec3 lo = Vec3::Constant(inf), hi = Vec3::Constant(-inf);
+        for (const Triangle& tri : B.triangles) {
+          const Vec3 &p0 = B.x[tri[0]], &p1 = B.x[tri[1]], &p2 = B.x[tri[2]];
+          lo = lo.cwiseMin(p0.cwiseMin(p1).cwiseMin(p2));
+          hi = hi.cwiseMax(p0.cwiseMax(p1).cwiseMax(p2));
+        }
+        P.lo = lo;
+        P.hi = hi;
+      }
+      const Vec3 &blo = P.lo, &bhi = P.hi;
+      if (apart(pen[a], blo, bhi)) continue;
       const TruthBody& A = bodies[a];
       const double strict = A.margin + B.margin;
       for (const Vec3& p : A.x) {
         if (p.x() <= blo.x() || p.y() <= blo.y() || p.z() <= blo.z() || p.x() >= bhi.x() || p.y() >= bhi.y() ||
             p.z() >= bhi.z())
           continue;
-        if (!grid.rayParityOdd(p, static_cast<Index>(b), 0) || !grid.rayParityOdd(p, static_cast<Index>(b), 1)) continue;
-        const double depth = grid.nearestDistance(p, static_cast<Index>(b), strict);
-        if (depth > strict) {
+        if (!parityOdd(p, 0) || !parityOdd(p, 1)) continue;
+        double depth = 0.0;
+        if (P.deeperThan(B, p, strict, depth)) {
           ++out.vertices;
           out.max_depth = std::max(out.max_depth, depth);
         }

@@ -20,6 +20,7 @@
 #include "psc/testkit/box_grid.h"
 #include "psc/types.h"
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -101,6 +102,60 @@ struct Penetration;
 class TriangleGrid;
 Penetration measurePenetration(const std::vector<TruthBody>& bodies, TriangleGrid& grid);
 
+/// The inside test of measurePenetration for one body and one ray axis: the parity of the
+/// crossings of the ray from p along +axis with the body's triangles, exactly as
+/// TriangleGrid::rayParityOdd counts them (same triangles, same tie rule), for many points p.
+/// The triangles are binned in a 2D grid across the axis (coordinates u = axis+1, w = axis+2
+/// mod 3), so a ray looks at the few triangles of its own column of this body instead of walking
+/// the cells of every body's triangles to the end of a 3D grid. A triangle goes into the cell of
+/// the low corner of its box and then every other cell of its box's range, and a query reads the
+/// 2×2 cells ending at its own: exactly one of them holds each triangle whose box spans the point.
+class RayColumns {
+ public:
+  /// Over `body`'s triangles at positions body.x (copied: the body may go). Triangles whose box
+  /// has a NaN coordinate are left out, as TriangleGrid's cells leave them out.
+  void build(const TruthBody& body, int axis);
+  /// Parity of the crossings of the ray from p along +axis. Even (false) for a p with a NaN.
+  bool parityOdd(const Vec3& p) const;
+
+  /// The grid, for tests: cell (i, j) spans about origin + [i, i+1)·cellSize along u, and
+  /// likewise along w (a point on a boundary may fall either way), i < dims()[0], j < dims()[1].
+  int axis() const { return axis_; }
+  double originU() const { return origin_u_; }
+  double originW() const { return origin_w_; }
+  double cellSize() const { return cell_; }
+  std::array<std::int64_t, 2> dims() const { return {nu_, nw_}; }
+
+ private:
+  // What a ray reads of a triangle: in each of its cells, its box rounded outward to float (a
+  // test on a few bytes that passes all the triangles the exact one passes) and where its
+  // corners are, (u, w, axis) each, in one place rather than in three vertices of the body.
+  struct Item {
+    float lo_u, hi_u, lo_w, hi_w, hi_a;
+    std::uint32_t corners;  // index into corners_
+  };
+  struct Corners {
+    double c[9];  // corner k: c[3k], c[3k+1], c[3k+2] = its u, w and axis coordinates
+  };
+  // A triangle in the build: its box across the axis.
+  struct Pending {
+    double lo_u, hi_u, lo_w, hi_w;
+    Index triangle;
+  };
+  static constexpr double kCellPerBox = 0.75;  // cell width / mean width of a triangle's box
+  std::int64_t cellU(double x) const;
+  std::int64_t cellW(double x) const;
+
+  int axis_ = 0;
+  double origin_u_ = 0.0, origin_w_ = 0.0, cell_ = 1.0, inv_cell_ = 1.0;
+  std::int64_t nu_ = 0, nw_ = 0;        // 0: nothing to cross
+  std::vector<std::uint32_t> offsets_;  // CSR over cells, u fastest
+  std::vector<Item> items_;             // in the cells' order; grown only (no refill when reused)
+  std::vector<Corners> corners_;        // per triangle in pending_ order; grown only
+  std::vector<Pending> pending_;
+  std::vector<std::uint32_t> fill_;
+};
+
 /// Uniform grid over all triangles of all bodies (a testkit::BoxGrid over their boxes), rebuilt
 /// from scratch for each query set.
 class TriangleGrid {
@@ -129,6 +184,25 @@ class TriangleGrid {
   testkit::BoxGrid grid_;                // item g: triangle tri_local_[g] of body tri_body_[g]
   std::vector<Index> tri_body_, tri_local_;
   std::vector<Vec3> body_lo_, body_hi_;  // bounds of each body's triangles
+
+  // measurePenetration's own structures, one per body, kept between calls and built only for a
+  // body that some vertex of another body lies inside the box of (grid_ is not built for it).
+  struct PenetrationBody {
+    Vec3 vertex_lo, vertex_hi;      // box of its vertices, NaN coordinates left out
+    bool vertex_nan = false;        // some vertex has a NaN coordinate
+    Vec3 lo, hi;                    // box of its triangles' boxes, computed as build() does
+    bool box_built = false;
+    RayColumns columns[2];          // rays along +x and +y
+    bool columns_built[2] = {false, false};
+    testkit::BoxGrid distance;      // its triangles' boxes (item = triangle), for the depths
+    Vec3 visible_lo, visible_hi;    // bounds of the boxes without NaN, the ones `distance` holds
+    bool distance_built = false;
+    bool any_visible = false;
+    /// Whether depth = nearestDistance(p, this body, strict) is > strict, then with that depth;
+    /// over `distance` (built on first use).
+    bool deeperThan(const TruthBody& body, const Vec3& p, double strict, double& depth);
+  };
+  std::vector<PenetrationBody> pen_;
 };
 
 /// Computes the truth with the grid; keeps its buffers between calls.
@@ -158,6 +232,9 @@ TruthResult groundTruthSelfBruteForce(const std::vector<TruthBody>& bodies, cons
 /// Vertices inside another closed body deeper than the strict radius (margin_A + margin_B): the
 /// user-visible failure. Inside = odd crossings along +x and along +y (two rays, so that a ray
 /// grazing an edge cannot fake an inside); depth = distance to that body's surface.
+/// `grid` only keeps measurePenetration's buffers between calls (per-body RayColumns and distance
+/// grids); the triangle grid itself is not built by it. The result is the one of the rays and
+/// the distance search of TriangleGrid (rayParityOdd, nearestDistance) over the same bodies.
 struct Penetration {
   double max_depth = 0.0;       ///< length units
   std::size_t vertices = 0;     ///< (vertex, body) pairs found penetrating

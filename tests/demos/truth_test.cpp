@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 namespace psc::demo {
@@ -279,6 +280,205 @@ TEST(TruthInside, PenetrationDepthAndMargins) {
   // Open bodies have no inside: the same points against a cloth patch give nothing.
   bodies[0].closed = false;
   EXPECT_EQ(measurePenetration(bodies, grid).vertices, 0u);
+}
+
+/// The crossing rule of TriangleGrid::rayParityOdd, restated over every triangle of `body`: the
+/// ray from p along +axis crosses a triangle whose box it meets (spans p across the axis, reaches
+/// p along it) and whose projection holds p, where a point on an edge or vertex shared by two
+/// triangles belongs to one of them only, at a hit beyond p.
+bool bruteParityOdd(const Vec3& p, const TruthBody& body, int axis) {
+  const int u = (axis + 1) % 3, w = (axis + 2) % 3;
+  bool odd = false;
+  for (const Triangle& t : body.triangles) {
+    Vec3 v[3] = {body.x[t[0]], body.x[t[1]], body.x[t[2]]};
+    const Vec3 lo = v[0].cwiseMin(v[1]).cwiseMin(v[2]), hi = v[0].cwiseMax(v[1]).cwiseMax(v[2]);
+    if (hi[axis] < p[axis] || lo[u] > p[u] || hi[u] < p[u] || lo[w] > p[w] || hi[w] < p[w]) continue;
+    const double area = (v[1][u] - v[0][u]) * (v[2][w] - v[0][w]) - (v[1][w] - v[0][w]) * (v[2][u] - v[0][u]);
+    if (area == 0.0) continue;
+    if (area < 0.0) std::swap(v[1], v[2]);
+    double e[3];
+    bool holds = true;
+    for (int j = 0; j < 3; ++j) {
+      const Vec3 &a = v[j], &b = v[(j + 1) % 3];
+      const double du = b[u] - a[u], dw = b[w] - a[w];
+      e[j] = du * (p[w] - a[w]) - dw * (p[u] - a[u]);
+      // On the edge: the triangle holds p only for edges heading to −w (or along +u).
+      holds = holds && (e[j] > 0.0 || (e[j] == 0.0 && (dw < 0.0 || (dw == 0.0 && du > 0.0))));
+    }
+    if (!holds) continue;
+    const double hit = (e[1] * v[0][axis] + e[2] * v[1][axis] + e[0] * v[2][axis]) / (e[0] + e[1] + e[2]);
+    if (hit > p[axis]) odd = !odd;
+  }
+  return odd;
+}
+
+/// measurePenetration by definition: every vertex of every body strictly inside the box of
+/// another closed body's triangles, odd along +x and +y, against every triangle of that body.
+Penetration bruteForcePenetration(const std::vector<TruthBody>& bodies) {
+  Penetration out;
+  for (std::size_t b = 0; b < bodies.size(); ++b) {
+    const TruthBody& B = bodies[b];
+    if (!B.closed || B.triangles.empty()) continue;
+    constexpr double inf = std::numeric_limits<double>::infinity();
+    Vec3 lo = Vec3::Constant(inf), hi = Vec3::Constant(-inf);
+    for (const Triangle& t : B.triangles)
+      for (Index v : t) lo = lo.cwiseMin(B.x[v]), hi = hi.cwiseMax(B.x[v]);
+    for (std::size_t a = 0; a < bodies.size(); ++a) {
+      if (a == b) continue;
+      const double strict = bodies[a].margin + B.margin;
+      for (const Vec3& p : bodies[a].x) {
+        if (!((p.array() > lo.array()).all() && (p.array() < hi.array()).all())) continue;
+        if (!bruteParityOdd(p, B, 0) || !bruteParityOdd(p, B, 1)) continue;
+        double depth = inf;
+        for (const Triangle& t : B.triangles)
+          depth = std::min(depth, testkit::pointTriangleDistance(p, B.x[t[0]], B.x[t[1]], B.x[t[2]]));
+        if (depth > strict) {
+          ++out.vertices;
+          out.max_depth = std::max(out.max_depth, depth);
+        }
+      }
+    }
+  }
+  return out;
+}
+
+/// Closed spheres, tori and boxes pushed into each other (random sizes, turns and margins, some
+/// margins zero), and an open patch through them, whose vertices may be inside the others too.
+std::vector<TruthBody> overlappingClosedBodies(std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<TruthBody> out;
+  const int closed = 3 + int(seed % 3);
+  for (int k = 0; k <= closed; ++k) {
+    TriMesh m;
+    const std::size_t n = 120 + std::size_t(u(rng) * 250);
+    if (k == closed)
+      m = makePatch(1.6, 1.6, 9, 9);
+    else if ((k + int(seed)) % 3 == 0)
+      m = makeSphere(0.3 + 0.3 * u(rng), n);
+    else if ((k + int(seed)) % 3 == 1)
+      m = makeTorus(0.45 + 0.2 * u(rng), 0.12 + 0.12 * u(rng), n);
+    else
+      m = makeBox(Vec3(0.2 + 0.3 * u(rng), 0.2 + 0.3 * u(rng), 0.2 + 0.3 * u(rng)), n);
+    // Every other seed leaves the shapes axis-aligned: rays along their edges and vertices.
+    if (seed % 2 == 1) m.rotate(randomVec(rng, -1, 1), 3.0 * u(rng));
+    m.translate(randomVec(rng, -0.35, 0.35));
+    TruthBody b;
+    b.x = b.prev = m.vertices;
+    b.triangles = m.triangles;
+    b.closed = k != closed;
+    b.margin = u(rng) < 0.3 ? 0.0 : 0.05 * u(rng);
+    out.push_back(std::move(b));
+  }
+  return out;
+}
+
+TEST(TruthInside, PenetrationEqualsBruteForceOnOverlappingClosedMeshes) {
+  TriangleGrid grid;  // reused across the configurations, as the runner reuses it across steps
+  std::size_t penetrating = 0, cases_with = 0;
+  for (std::uint64_t seed = 1; seed <= 24; ++seed) {
+    std::vector<TruthBody> bodies = overlappingClosedBodies(seed);
+    // Vertices of the patch exactly on cell boundaries of the first closed body's ray columns
+    // (the cell of a point is found by a division: such points may fall either way, and must be
+    // counted the same), in line with that body's own vertices, and one with a NaN (never inside).
+    TruthBody& patch = bodies.back();  // (references into `bodies`: used before the grazers join)
+    const TruthBody& first = bodies.front();
+    for (int axis = 0; axis < 2; ++axis) {
+      RayColumns columns;
+      columns.build(first, axis);
+      const int cu = (axis + 1) % 3, cw = (axis + 2) % 3;
+      for (std::int64_t i = 0; i <= columns.dims()[0]; i += 3)
+        for (std::int64_t j = 0; j <= columns.dims()[1]; j += 3) {
+          Vec3 p = Vec3::Zero();
+          p[axis] = 0.01 * double(i - j);
+          p[cu] = columns.originU() + double(i) * columns.cellSize();
+          p[cw] = columns.originW() + double(j) * columns.cellSize();
+          patch.x.push_back(p);
+        }
+    }
+    // Rays exactly through vertices (and along edges) of that body: the tie rule at work.
+    for (std::size_t v = 0; v < first.x.size(); v += 3) {
+      patch.x.push_back(first.x[v] - Vec3(0.0625, 0.0, 0.0));
+      patch.x.push_back(first.x[v] - Vec3(0.0, 0.0625, 0.0));
+      patch.x.push_back(first.x[v] * 0.5);
+    }
+    patch.x.push_back(Vec3(0.0, std::nan(""), 0.0));
+    patch.prev = patch.x;
+    // Tiny open bodies barely into the first one through each face of its box (just behind its
+    // extreme vertex that way), so that the box tests must not skip a body pair that just meets.
+    if (seed % 2 == 0) bodies.front().margin = 0.0;
+    for (int k = 0; k < 3; ++k)
+      for (double sign : {-1.0, 1.0}) {
+        const TruthBody& front = bodies.front();
+        Vec3 extreme = front.x[0];
+        for (const Vec3& v : front.x)
+          if (sign * v[k] > sign * extreme[k]) extreme = v;
+        TruthBody grazer;
+        Vec3 out = Vec3::Zero(), side = Vec3::Zero();
+        out[k] = sign;
+        side[(k + 1) % 3] = 1.0;
+        grazer.x = {extreme - 0.005 * out, extreme + 0.5 * out, extreme + 0.5 * out + 0.5 * side};
+        grazer.prev = grazer.x;
+        grazer.triangles = {{0, 1, 2}};
+        bodies.push_back(std::move(grazer));
+      }
+    const Penetration brute = bruteForcePenetration(bodies);
+    const Penetration pen = measurePenetration(bodies, grid);
+    EXPECT_EQ(pen.vertices, brute.vertices) << "seed " << seed;
+    EXPECT_EQ(pen.max_depth, brute.max_depth) << "seed " << seed;
+    penetrating += brute.vertices;
+    cases_with += brute.vertices > 0;
+  }
+  // Deep and shallow insides in most configurations, not a comparison of zeros.
+  EXPECT_GT(penetrating, 2000u);
+  EXPECT_GT(cases_with, 20u);
+}
+
+TEST(TruthInside, RayColumnsCountLikeTheGrid) {
+  // The columns measurePenetration casts its rays in against TriangleGrid's own rays, on the
+  // tessellated box (rays exactly along its edges and through its vertices) and a turned torus,
+  // from points on the columns' cell boundaries, at the mesh's vertices and at random.
+  std::vector<TruthBody> bodies(2);
+  const TriMesh box = makeBox(Vec3(1, 1, 1), 300);
+  TriMesh torus = makeTorus(0.8, 0.3, 500);
+  torus.rotate(Vec3(1, 2, 3), 0.7).translate(Vec3(2.5, 0.1, -0.2));
+  bodies[0].x = box.vertices;
+  bodies[0].triangles = box.triangles;
+  bodies[1].x = torus.vertices;
+  bodies[1].triangles = torus.triangles;
+  for (TruthBody& b : bodies) b.prev = b.x, b.closed = true;
+  TriangleGrid grid;
+  grid.build(bodies);
+  std::mt19937_64 rng(7);
+  std::size_t odd = 0, checked = 0;
+  for (Index b = 0; b < 2; ++b)
+    for (int axis = 0; axis < 3; ++axis) {
+      RayColumns columns;
+      columns.build(bodies[b], axis);
+      ASSERT_GT(columns.dims()[0] * columns.dims()[1], 16);
+      const int cu = (axis + 1) % 3, cw = (axis + 2) % 3;
+      std::vector<Vec3> points;
+      for (std::int64_t i = 0; i <= columns.dims()[0]; ++i)
+        for (std::int64_t j = 0; j <= columns.dims()[1]; ++j) {
+          Vec3 p = bodies[b].x[std::size_t(i * 31 + j) % bodies[b].x.size()];
+          p[cu] = columns.originU() + double(i) * columns.cellSize();
+          p[cw] = columns.originW() + double(j) * columns.cellSize();
+          points.push_back(p);
+        }
+      for (const Vec3& v : bodies[b].x) points.push_back(v), points.push_back(0.5 * v + 0.5 * bodies[b].x[0]);
+      for (double x : {-0.5, 0.0, 0.5})
+        for (double y : {-0.5, 0.0, 0.5})
+          for (double z : {-0.5, 0.0, 0.5}) points.push_back(Vec3(x, y, z));
+      for (int r = 0; r < 2000; ++r) points.push_back(randomVec(rng, -1.2, 3.6));
+      for (const Vec3& p : points) {
+        const bool expected = grid.rayParityOdd(p, b, axis);
+        ASSERT_EQ(columns.parityOdd(p), expected) << "body " << b << " axis " << axis << " at " << p.transpose();
+        EXPECT_EQ(bruteParityOdd(p, bodies[b], axis), expected);
+        odd += expected;
+        ++checked;
+      }
+    }
+  EXPECT_GT(odd, checked / 10);
 }
 
 }  // namespace
