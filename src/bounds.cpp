@@ -1000,37 +1000,41 @@ constexpr std::array<std::array<std::uint8_t, 4>, 16> kLeftPack = {{
     {0, 0, 0, 0}, {0, 0, 0, 0}, {1, 0, 0, 0}, {0, 1, 0, 0}, {2, 0, 0, 0}, {0, 2, 0, 0}, {1, 2, 0, 0}, {0, 1, 2, 0},
     {3, 0, 0, 0}, {0, 3, 0, 0}, {1, 3, 0, 0}, {0, 1, 3, 0}, {2, 3, 0, 0}, {0, 2, 3, 0}, {1, 2, 3, 0}, {0, 1, 2, 3}}};
 
+/// The probe of collectMeets, four kept triangles at a time (AVX2): the same operations in the same
+/// order as its SSE2 loop, without fused multiply-adds, so the same triangles pass.
+struct ProbeLanes {
+  __m256d lox, loy, loz, hix, hiy, hiz, r2, n_lo, n_hi;
+  [[gnu::target("avx2")]] ProbeLanes(const Probe& pr, double nl, double nh)
+      : lox(_mm256_set1_pd(pr.lo.x())), loy(_mm256_set1_pd(pr.lo.y())), loz(_mm256_set1_pd(pr.lo.z())),
+        hix(_mm256_set1_pd(pr.hi.x())), hiy(_mm256_set1_pd(pr.hi.y())), hiz(_mm256_set1_pd(pr.hi.z())),
+        r2(_mm256_set1_pd(pr.r * pr.r)), n_lo(_mm256_set1_pd(nl)), n_hi(_mm256_set1_pd(nh)) {}
+  /// Lanes j..j+3: the probe meets the triangle's box and their extents along the sensor axis meet.
+  [[gnu::target("avx2")]] __m256d meets(const KeptTriangles& kept, std::size_t j) const {
+    const __m256d zero = _mm256_setzero_pd();
+    const __m256d dx = _mm256_max_pd(zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(kept.lo_x.data() + j), hix),
+                                                         _mm256_sub_pd(lox, _mm256_loadu_pd(kept.hi_x.data() + j))));
+    const __m256d dy = _mm256_max_pd(zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(kept.lo_y.data() + j), hiy),
+                                                         _mm256_sub_pd(loy, _mm256_loadu_pd(kept.hi_y.data() + j))));
+    const __m256d dz = _mm256_max_pd(zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(kept.lo_z.data() + j), hiz),
+                                                         _mm256_sub_pd(loz, _mm256_loadu_pd(kept.hi_z.data() + j))));
+    const __m256d d2 =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz));
+    return _mm256_and_pd(_mm256_cmp_pd(d2, r2, _CMP_LE_OQ),
+                         _mm256_and_pd(_mm256_cmp_pd(n_hi, _mm256_loadu_pd(kept.n_lo.data() + j), _CMP_GE_OQ),
+                                       _mm256_cmp_pd(n_lo, _mm256_loadu_pd(kept.n_hi.data() + j), _CMP_LE_OQ)));
+  }
+};
+
 /// collectMeets<false> four triangles per instruction, for processors with AVX2 (chosen at run
-/// time). The same operations in the same order as the SSE2 loop, without fused multiply-adds, so
-/// the same triangles pass.
-/// `padded`: KeptTriangles::pad()'s size (the loop then has no tail), or kept.size().
+/// time). `padded`: KeptTriangles::pad()'s size (the loop then has no tail), or kept.size().
 [[gnu::target("avx2")]] std::size_t collectMeetsAvx2(const KeptTriangles& kept, std::size_t padded, const Probe& pr,
                                                      double n_lo, double n_hi, Index* hits) {
   const std::size_t m = kept.size();
-  const double r2 = pr.r * pr.r;
-  const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
-  const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
-  const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
-  const __m256d lox = _mm256_set1_pd(pr.lo.x()), loy = _mm256_set1_pd(pr.lo.y()), loz = _mm256_set1_pd(pr.lo.z());
-  const __m256d hix = _mm256_set1_pd(pr.hi.x()), hiy = _mm256_set1_pd(pr.hi.y()), hiz = _mm256_set1_pd(pr.hi.z());
-  const __m256d vr2 = _mm256_set1_pd(r2);
-  const __m256d vnl = _mm256_set1_pd(n_lo), vnh = _mm256_set1_pd(n_hi), zero = _mm256_setzero_pd();
+  const ProbeLanes probe(pr, n_lo, n_hi);
   const Index* record = kept.record.data();
   std::size_t j = 0, n_hits = 0;
   for (; j + 4 <= padded; j += 4) {
-    const __m256d dx = _mm256_max_pd(
-        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lx + j), hix), _mm256_sub_pd(lox, _mm256_loadu_pd(hx + j))));
-    const __m256d dy = _mm256_max_pd(
-        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(ly + j), hiy), _mm256_sub_pd(loy, _mm256_loadu_pd(hy + j))));
-    const __m256d dz = _mm256_max_pd(
-        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lz + j), hiz), _mm256_sub_pd(loz, _mm256_loadu_pd(hz + j))));
-    const __m256d d2 =
-        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz));
-    const __m256d ok = _mm256_and_pd(
-        _mm256_cmp_pd(d2, vr2, _CMP_LE_OQ),
-        _mm256_and_pd(_mm256_cmp_pd(vnh, _mm256_loadu_pd(tnl + j), _CMP_GE_OQ),
-                      _mm256_cmp_pd(vnl, _mm256_loadu_pd(tnh + j), _CMP_LE_OQ)));
-    const int mask = _mm256_movemask_pd(ok);
+    const int mask = _mm256_movemask_pd(probe.meets(kept, j));
     // Left-packed without a branch: the four slots are written, the count moves by the passes.
     const std::array<std::uint8_t, 4>& lanes = kLeftPack[mask];
     hits[n_hits] = record[j + lanes[0]];
@@ -1051,46 +1055,25 @@ constexpr std::array<std::array<std::uint8_t, 4>, 16> kLeftPack = {{
   }
   return n_hits;
 }
-#endif
 
-#if defined(PSC_HAVE_AVX2_PATH)
-/// collectMeets<true> (self pairs) four triangles per instruction (AVX2): the same operations in
-/// the same order as its SSE2 loop, so the same triangles pass, in the same order. `padded`:
-/// KeptTriangles::pad()'s size (its boxes meet nothing, so no tail; the padding's rest centroids are
-/// never read as a pass).
+/// collectMeets<true> (self pairs) four triangles per instruction (AVX2): the same operations as
+/// its SSE2 loop, so the same triangles pass, in the same order. `padded`: KeptTriangles::pad()'s
+/// size (its boxes meet nothing, so no tail; the padding's rest centroids are never read as a pass).
 [[gnu::target("avx2")]] std::size_t collectSelfMeetsAvx2(const KeptTriangles& kept, std::size_t padded,
                                                          const Probe& pr, double n_lo, double n_hi, const Vec3& rest,
                                                          double exclude2, Index* hits) {
-  const double r2 = pr.r * pr.r;
-  const double *lx = kept.lo_x.data(), *ly = kept.lo_y.data(), *lz = kept.lo_z.data();
-  const double *hx = kept.hi_x.data(), *hy = kept.hi_y.data(), *hz = kept.hi_z.data();
-  const double *tnl = kept.n_lo.data(), *tnh = kept.n_hi.data();
+  const ProbeLanes probe(pr, n_lo, n_hi);
   const double *gx = kept.mid_x.data(), *gy = kept.mid_y.data(), *gz = kept.mid_z.data();
   const Index* record = kept.record.data();
-  const __m256d lox = _mm256_set1_pd(pr.lo.x()), loy = _mm256_set1_pd(pr.lo.y()), loz = _mm256_set1_pd(pr.lo.z());
-  const __m256d hix = _mm256_set1_pd(pr.hi.x()), hiy = _mm256_set1_pd(pr.hi.y()), hiz = _mm256_set1_pd(pr.hi.z());
-  const __m256d vr2 = _mm256_set1_pd(r2);
-  const __m256d vnl = _mm256_set1_pd(n_lo), vnh = _mm256_set1_pd(n_hi), zero = _mm256_setzero_pd();
   const __m256d px = _mm256_set1_pd(rest.x()), py = _mm256_set1_pd(rest.y()), pz = _mm256_set1_pd(rest.z());
   const __m256d e2 = _mm256_set1_pd(exclude2);
   std::size_t n_hits = 0;
   for (std::size_t j = 0; j + 4 <= padded; j += 4) {
-    const __m256d dx = _mm256_max_pd(
-        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lx + j), hix), _mm256_sub_pd(lox, _mm256_loadu_pd(hx + j))));
-    const __m256d dy = _mm256_max_pd(
-        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(ly + j), hiy), _mm256_sub_pd(loy, _mm256_loadu_pd(hy + j))));
-    const __m256d dz = _mm256_max_pd(
-        zero, _mm256_max_pd(_mm256_sub_pd(_mm256_loadu_pd(lz + j), hiz), _mm256_sub_pd(loz, _mm256_loadu_pd(hz + j))));
-    const __m256d d2 =
-        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz));
     const __m256d ex = _mm256_sub_pd(_mm256_loadu_pd(gx + j), px), ey = _mm256_sub_pd(_mm256_loadu_pd(gy + j), py);
     const __m256d ez = _mm256_sub_pd(_mm256_loadu_pd(gz + j), pz);
     const __m256d g2 =
         _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)), _mm256_mul_pd(ez, ez));
-    const __m256d ok = _mm256_and_pd(
-        _mm256_and_pd(_mm256_cmp_pd(d2, vr2, _CMP_LE_OQ), _mm256_cmp_pd(g2, e2, _CMP_GE_OQ)),
-        _mm256_and_pd(_mm256_cmp_pd(vnh, _mm256_loadu_pd(tnl + j), _CMP_GE_OQ),
-                      _mm256_cmp_pd(vnl, _mm256_loadu_pd(tnh + j), _CMP_LE_OQ)));
+    const __m256d ok = _mm256_and_pd(probe.meets(kept, j), _mm256_cmp_pd(g2, e2, _CMP_GE_OQ));
     // Most self pairs the boxes keep are neighbours at rest: passes are rare, so a branch.
     unsigned mask = static_cast<unsigned>(_mm256_movemask_pd(ok));
     while (mask != 0) {
