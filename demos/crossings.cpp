@@ -1,7 +1,6 @@
 #include "crossings.h"
 
 #include <algorithm>
-#include <cfloat>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -100,17 +99,6 @@ constexpr double kCellPerExtent = 2.5;
 
 constexpr float kFloatInf = std::numeric_limits<float>::infinity();
 
-/// A float at or below v, and one at or above it: the float boxes of the item grid must contain
-/// the double ones. Moving v by 2^-22 of itself (and 1e-30, for floats near zero) before
-/// rounding to nearest is more than the rounding can take back, without a branch per coordinate.
-/// Beyond the float range: the largest float, or an infinity, whichever keeps v inside.
-float floatBelow(double v) {
-  const double w = v - (std::abs(v) * 0x1p-22 + 1e-30);
-  return w >= -static_cast<double>(FLT_MAX) ? static_cast<float>(std::min(w, static_cast<double>(FLT_MAX)))
-                                            : -std::numeric_limits<float>::infinity();
-}
-float floatAbove(double v) { return -floatBelow(-v); }
-
 /// The rows of a float box (CrossingCounter::FloatBox) as Eigen arrays, for 4-lane arithmetic.
 using FloatRow = Eigen::Array4f;
 template <class Box>
@@ -140,8 +128,8 @@ template <class Box>
 Box pointBox(const Vec3& p) {
   Box box;
   for (int k = 0; k < 3; ++k) {
-    box.lo[k] = floatBelow(p[k]);
-    box.hi[k] = floatAbove(p[k]);
+    box.lo[k] = testkit::floatBelow(p[k]);
+    box.hi[k] = testkit::floatAbove(p[k]);
   }
   box.lo[3] = box.hi[3] = 0.0f;
   return box;

@@ -53,22 +53,6 @@ double maxMargin(const std::vector<TruthBody>& bodies) {
   return m;
 }
 
-/// x rounded to a float ≤ x (floatDown) or ≥ x (floatUp), for boxes that must only grow.
-float floatDown(double x) {
-  constexpr float big = std::numeric_limits<float>::max();
-  if (x > big) return big;
-  if (!(x >= -big)) return -std::numeric_limits<float>::infinity();  // also NaN: never excludes
-  const float f = static_cast<float>(x);
-  return static_cast<double>(f) > x ? std::nextafter(f, -big) : f;
-}
-float floatUp(double x) {
-  constexpr float big = std::numeric_limits<float>::max();
-  if (x < -big) return -big;
-  if (!(x <= big)) return std::numeric_limits<float>::infinity();
-  const float f = static_cast<float>(x);
-  return static_cast<double>(f) < x ? std::nextafter(f, big) : f;
-}
-
 /// Whether the ray from p along +axis crosses triangle (c0, c1, c2), whose box the ray meets
 /// (spans p across the axis and reaches p along it). Both ray casts (TriangleGrid and
 /// RayColumns) count with this one function, so they agree bit for bit, ties included.
@@ -246,8 +230,8 @@ void RayColumns::build(const TruthBody& body, int axis) {
       c[3 * m + 1] = v[w];
       c[3 * m + 2] = v[axis];
     }
-    const Item item{floatDown(t.lo_u), floatUp(t.hi_u), floatDown(t.lo_w), floatUp(t.hi_w),
-                    floatUp(std::max({c[2], c[5], c[8]})), static_cast<std::uint32_t>(k)};
+    const Item item{testkit::floatBelow(t.lo_u), testkit::floatAbove(t.hi_u), testkit::floatBelow(t.lo_w), testkit::floatAbove(t.hi_w),
+                    testkit::floatAbove(std::max({c[2], c[5], c[8]})), static_cast<std::uint32_t>(k)};
     const std::int64_t i0 = cellU(t.lo_u), i1 = cellU(t.hi_u), j0 = cellW(t.lo_w), j1 = cellW(t.hi_w);
     for (std::int64_t j = j0; j <= j1; j += 2)
       for (std::int64_t i = i0; i <= i1; i += 2) items_[fill_[static_cast<std::size_t>(j * nu_ + i)]++] = item;

@@ -78,7 +78,6 @@ class ForeignChunks {
   /// the value of an empty slot.
   ForeignChunks(std::size_t vertices, Index chunks, const std::vector<std::pair<Index, Index>>& pairs);
   Index none() const { return none_; }
-  std::size_t vertexCount() const { return count_; }
   /// The two slots of vertex v: its first two foreign chunks, or none().
   Index first(std::size_t v) const { return slots_[2 * v]; }
   Index second(std::size_t v) const { return slots_[2 * v + 1]; }
@@ -104,7 +103,6 @@ class ForeignChunks {
   PackedIndices slots_;
   std::vector<std::pair<Index, Index>> extra_;
   Index none_ = 0;
-  std::size_t count_ = 0;
 };
 
 /// [beyond] The bounds layer under the regions: each region cut into compact chunks of at most

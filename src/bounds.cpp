@@ -699,8 +699,8 @@ struct TriangleLanes {
   }
 };
 
-/// The triangles of one chunk pair that reach the vertex chunk's box, as a structure of arrays:
-/// the probe loop reads them two at a time (SSE2), without a branch per test.
+/// The triangles of one chunk pair that its picked vertices can reach, as a structure of arrays:
+/// the probe loop reads them four at a time (AVX2) or two (SSE2), without a branch per test.
 struct KeptTriangles {
   std::vector<double> lo_x, lo_y, lo_z, hi_x, hi_y, hi_z, n_lo, n_hi;
   std::vector<double> mid_x, mid_y, mid_z;  ///< self pairs: rest centroids
@@ -1320,10 +1320,9 @@ void keepScalar(const TriangleLanes& t, std::size_t at, std::size_t from, std::s
 /// the picked vertices' probes test: the box of each ball (x, r) and [xn − r, xn + r] along the
 /// sensor axis. A triangle outside that union fails every probe, so none is lost. The axis bounds
 /// are the probes' own values; the box grows by a relative 1e-9, so that a probe that passes by
-/// rounding (a box distance of r up to an ulp) still finds its triangle kept.
+/// rounding (a box distance of r up to an ulp) still finds its triangle kept. At least one pick.
 void narrowToPicks(const VertexLanes& lanes, std::size_t at, const Index* picked, std::size_t n_picked, bool sensors,
                    Vec3& lo, Vec3& hi, double& n_lo, double& n_hi) {
-  if (n_picked == 0) return;
   const double inf = std::numeric_limits<double>::infinity();
   double lx = inf, ly = inf, lz = inf, hx = -inf, hy = -inf, hz = -inf, nl = inf, nh = -inf, scale = 0.0;
   for (std::size_t k = 0; k < n_picked; ++k) {

@@ -69,7 +69,7 @@ void splitChunks(std::vector<Index>& ids, std::size_t begin, std::size_t end, st
 }  // namespace
 
 ForeignChunks::ForeignChunks(std::size_t vertices, Index chunks, const std::vector<std::pair<Index, Index>>& pairs)
-    : slots_(2 * vertices, chunks), none_(chunks), count_(vertices) {
+    : slots_(2 * vertices, chunks), none_(chunks) {
   // Sorted and unique per vertex, like IndexRows::fromPairs.
   const IndexRows rows = IndexRows::fromPairs(vertices, pairs);
   for (std::size_t v = 0; v < vertices; ++v) {

@@ -1,11 +1,20 @@
 #include "psc/testkit/box_grid.h"
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <limits>
 #include <utility>
 
 namespace psc::testkit {
+
+float floatBelow(double v) {
+  // Moving v by 2^-22 of itself (and 1e-30, for floats near zero) before rounding to nearest is
+  // more than the rounding can take back, without a branch per coordinate.
+  const double w = v - (std::abs(v) * 0x1p-22 + 1e-30);
+  return w >= -static_cast<double>(FLT_MAX) ? static_cast<float>(std::min(w, static_cast<double>(FLT_MAX)))
+                                            : -std::numeric_limits<float>::infinity();
+}
 
 void BoxGrid::build(std::vector<Box> boxes, double cell) {
   boxes_ = std::move(boxes);

@@ -12,6 +12,12 @@
 
 namespace psc::testkit {
 
+/// A float at or below v, and one at or above it: for boxes kept in float that must hold the
+/// double ones. Beyond the float range: the largest float, or an infinity, whichever keeps v
+/// inside; a NaN gives the infinity that excludes nothing.
+float floatBelow(double v);
+inline float floatAbove(double v) { return -floatBelow(-v); }
+
 /// An axis-aligned box, lo ≤ hi.
 struct Box {
   Vec3 lo, hi;
