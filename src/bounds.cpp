@@ -877,8 +877,8 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
     if (ctx.self_exclude2 >= 0.0) rec.rest_mid = (ctx.tb.rest[tri[0]] + ctx.tb.rest[tri[1]] + ctx.tb.rest[tri[2]]) / 3.0;
     if (ctx.axis.valid) {
       const double pa = ctx.axis.project(a), pb = ctx.axis.project(b), pc = ctx.axis.project(cc);
-      rec.nlo = std::min({pa, pb, pc});
-      rec.nhi = std::max({pa, pb, pc});
+      rec.nlo = std::min(pa, std::min(pb, pc));
+      rec.nhi = std::max(pa, std::max(pb, pc));
     }
     // Swept: the triangle's swept volume lies in the box of its six positions (now and before).
     // Ahead: the box of its corners now and ahead_steps steps ahead.
