@@ -775,6 +775,8 @@ struct Scratch {
   /// chunkCandidates with MotionBound::Radius: the pairs whose boxes meet, (vertex record,
   /// triangle record), whose exact distance is then measured four at a time.
   std::vector<std::pair<Index, Index>> pending;
+  /// gatherTriangles: the positions of a chunk's table (and the other end of their paths).
+  std::vector<Vec3> table_now, table_other;
   /// Forgets the gathered vertex and triangle records (ChunkRef's offsets must be reset with them).
   void clearRecords() {
     verts.clear();
@@ -867,26 +869,40 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   const ChunkLists& ch = ctx.tb.chunks;
   const bool swept = ctx.swept && !ctx.tb.previous.empty();
   const bool ahead = ctx.ahead_steps > 0.0 && !ctx.tb.previous.empty();
+  // Each vertex of the chunk's table read once (from the body's positions, usually Bullet's
+  // 256-byte nodes), not once per triangle corner: about 45 reads for a chunk's 64 triangles
+  // instead of 192. With Swept or Ahead, the other end of each corner's path beside it.
+  const Index* table = ch.table.data() + ch.table_begin[c.chunk];
+  const std::size_t n_table = ch.table_begin[c.chunk + 1] - ch.table_begin[c.chunk];
+  std::vector<Vec3>& at_now = ctx.s.table_now;
+  std::vector<Vec3>& at_other = ctx.s.table_other;
+  at_now.resize(n_table);
+  for (std::size_t j = 0; j < n_table; ++j) at_now[j] = ctx.tb.positions[table[j]];
+  if (swept || ahead) {
+    at_other.resize(n_table);
+    for (std::size_t j = 0; j < n_table; ++j) {
+      const Vec3 q = ctx.tb.previous[table[j]];
+      // Swept: the triangle's swept volume lies in the box of its six positions (now and before).
+      // Ahead: the box of its corners now and ahead_steps steps ahead.
+      at_other[j] = swept ? q : Vec3(at_now[j] + ctx.ahead_steps * (at_now[j] - q));
+    }
+  }
   const std::size_t first = ch.triangle_begin[c.chunk];
   const std::size_t out = ctx.s.tri_lanes.grow(ch.triangle_begin[c.chunk + 1] - first);
   ctx.s.corners.resize(out + ch.triangle_begin[c.chunk + 1] - first);
   for (std::size_t at = first; at < ch.triangle_begin[c.chunk + 1]; ++at) {
-    const Triangle tri = ch.triangle(c.chunk, at);
-    const Vec3 a = ctx.tb.positions[tri[0]], b = ctx.tb.positions[tri[1]], cc = ctx.tb.positions[tri[2]];
+    const Index la = ch.corners[3 * at], lb = ch.corners[3 * at + 1], lc = ch.corners[3 * at + 2];
+    const Vec3 &a = at_now[la], &b = at_now[lb], &cc = at_now[lc];
     TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0};
-    if (ctx.self_exclude2 >= 0.0) rec.rest_mid = (ctx.tb.rest[tri[0]] + ctx.tb.rest[tri[1]] + ctx.tb.rest[tri[2]]) / 3.0;
+    if (ctx.self_exclude2 >= 0.0) rec.rest_mid = (ctx.tb.rest[table[la]] + ctx.tb.rest[table[lb]] + ctx.tb.rest[table[lc]]) / 3.0;
     if (ctx.axis.valid) {
       const double pa = ctx.axis.project(a), pb = ctx.axis.project(b), pc = ctx.axis.project(cc);
       rec.nlo = std::min(pa, std::min(pb, pc));
       rec.nhi = std::max(pa, std::max(pb, pc));
     }
-    // Swept: the triangle's swept volume lies in the box of its six positions (now and before).
-    // Ahead: the box of its corners now and ahead_steps steps ahead.
     if (swept || ahead) {
-      const Vec3 now[3] = {a, b, cc};
-      for (int i = 0; i < 3; ++i) {
-        const Vec3 q = ctx.tb.previous[tri[i]];
-        const Vec3 p = swept ? q : Vec3(now[i] + ctx.ahead_steps * (now[i] - q));
+      for (const Index l : {la, lb, lc}) {
+        const Vec3& p = at_other[l];
         rec.lo = rec.lo.cwiseMin(p);
         rec.hi = rec.hi.cwiseMax(p);
         if (ctx.axis.valid) {
