@@ -369,9 +369,14 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
         const psc::CandidatePair& ahead = c[kAhead + l];
         __builtin_prefetch(&faces[ahead.triangle]);
         __builtin_prefetch(&nodes[ahead.vertex].m_x);
+        __builtin_prefetch(&nodes[ahead.vertex].m_q);
+        __builtin_prefetch(&nodes[ahead.vertex].m_im);
       }
       if (last - c > d::kVfLanes + l) {
-        for (const btSoftBody::Node* n : faces[c[d::kVfLanes + l].triangle].m_n) __builtin_prefetch(&n->m_x);
+        for (const btSoftBody::Node* n : faces[c[d::kVfLanes + l].triangle].m_n) {
+          __builtin_prefetch(&n->m_x);
+          __builtin_prefetch(&n->m_im);
+        }
       }
       assert(static_cast<int>(c[l].vertex) < node_body.m_nodes.size());
       assert(static_cast<int>(c[l].triangle) < face_body.m_faces.size());
