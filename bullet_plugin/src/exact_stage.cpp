@@ -406,8 +406,8 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
       } else if (out.contact & bit) {
         // Without the crossing test nothing more is done with the contact: it is written where it
         // goes. (Written field by field into a local and then copied, each copy read the contact
-        // back across those narrower writes, a store-forwarding stall on every contact: about a
-        // fifth of the exact stage on 8 tori x 2,000 vertices.)
+        // back across those narrower writes, a store-forwarding stall on every contact: the exact
+        // stage took 0.39 ms a step on 8 tori x 2,000 vertices with it, 0.36 without.)
         btSoftBody::SContact& into = continuous ? contact : node_body.m_scontacts.expandNonInitializing();
         setContact(ctx, node, face, btVector3(out.wx[l], out.wy[l], out.wz[l]), btVector3(out.nx[l], out.ny[l], out.nz[l]),
                    out.margin[l], out.cfm0[l], out.cfm1[l], into);
