@@ -152,9 +152,10 @@ Box paddedBox(const Box& a, const Box& b, const Box& c) {
   return box;
 }
 
-/// The float box of the edge between points with boxes a and b (unpadded, as edge boxes are).
+/// The smallest float box holding boxes a and b: an edge's box from its two vertices' (unpadded,
+/// as edge boxes are), or a union of item boxes.
 template <class Box>
-Box edgeBox(const Box& a, const Box& b) {
+Box unionBox(const Box& a, const Box& b) {
   Box box;
   Eigen::Map<FloatRow, Eigen::Aligned16>(box.lo) = loRow(a).min(loRow(b));
   Eigen::Map<FloatRow, Eigen::Aligned16>(box.hi) = hiRow(a).max(hiRow(b));
@@ -181,7 +182,7 @@ bool boxesMeet(const Box& a, const Box& b) {
 template <class Box>
 inline bool crosses(const Edge& e, const Box* vb, const std::vector<Vec3>& xe, const Triangle& t,
                     const std::vector<Vec3>& xt, const Box& tbox) {
-  return boxesMeet(edgeBox(vb[e[0]], vb[e[1]]), tbox) &&
+  return boxesMeet(unionBox(vb[e[0]], vb[e[1]]), tbox) &&
          segmentCrossesTriangle(xe[e[0]], xe[e[1]], xt[t[0]], xt[t[1]], xt[t[2]]);
 }
 
@@ -372,9 +373,8 @@ std::size_t CrossingCounter::edgeCrossings(const std::vector<CrossingMesh>& mesh
   vertex_boxes_.clear();
   boxes_.clear();
   bodies_.clear();
-  ItemSpan unused;
   for (std::size_t b = 0; b < meshes.size(); ++b)
-    if (meetsOther(body_boxes, b, body_boxes[b])) bodies_.push_back(addItems(topology(b, meshes[b]), x[b], unused));
+    if (meetsOther(body_boxes, b, body_boxes[b])) bodies_.push_back(addItems(topology(b, meshes[b]), x[b], nullptr));
   if (bodies_.size() < 2) return 0;
   // Then the items near another body, on the union of each body's item boxes (which holds the
   // float box of every triangle and edge of it); the others leave the grid.
@@ -382,10 +382,7 @@ std::size_t CrossingCounter::edgeCrossings(const std::vector<CrossingMesh>& mesh
                                                          {-kFloatInf, -kFloatInf, -kFloatInf, 0.0f}});
   for (std::size_t k = 0; k < bodies_.size(); ++k)
     for (std::size_t i = bodies_[k].first_item; i < bodies_[k].first_item + bodies_[k].items(); ++i)
-      if (!isEmpty(boxes_[i])) {
-        Eigen::Map<FloatRow, Eigen::Aligned16>(unions[k].lo) = loRow(unions[k]).min(loRow(boxes_[i]));
-        Eigen::Map<FloatRow, Eigen::Aligned16>(unions[k].hi) = hiRow(unions[k]).max(hiRow(boxes_[i]));
-      }
+      if (!isEmpty(boxes_[i])) unions[k] = unionBox(unions[k], boxes_[i]);
   ItemSpan span;
   item_body_.resize(boxes_.size());
   for (std::size_t k = 0; k < bodies_.size(); ++k)
@@ -433,7 +430,7 @@ std::size_t CrossingCounter::selfEdgeCrossings(const std::vector<CrossingMesh>& 
     vertex_boxes_.clear();
     boxes_.clear();
     ItemSpan span;
-    const BodyItems body = addItems(topology(b, meshes[b]), x[b], span);
+    const BodyItems body = addItems(topology(b, meshes[b]), x[b], &span);
     count += selfCrossingsOf(body, span);
   }
   return count;
@@ -519,7 +516,7 @@ const CrossingCounter::Topology& CrossingCounter::topology(std::size_t b, const 
   return topo;
 }
 
-CrossingCounter::BodyItems CrossingCounter::addItems(const Topology& topo, const std::vector<Vec3>& x, ItemSpan& span) {
+CrossingCounter::BodyItems CrossingCounter::addItems(const Topology& topo, const std::vector<Vec3>& x, ItemSpan* span) {
   const std::vector<Triangle>& tris = topo.triangles;
   BodyItems body{&topo, &x, boxes_.size(), vertex_boxes_.size(), left_out_.size(), lone_.size(), 0};
   bool all_finite = true;
@@ -554,13 +551,13 @@ CrossingCounter::BodyItems CrossingCounter::addItems(const Topology& topo, const
       continue;
     }
     box[t] = paddedBox(vb[tris[t][0]], vb[tris[t][1]], vb[tris[t][2]]);
-    span.add(box[t]);
+    if (span != nullptr) span->add(box[t]);
   }
   for (std::size_t l = 0; l < body.lone_count; ++l) {
     const Edge& e = lone_[body.first_lone + l];
     FloatBox& b = box[tris.size() + l];
     b = paddedBox(vb[e[0]], vb[e[1]], vb[e[1]]);
-    span.add(b);
+    if (span != nullptr) span->add(b);
   }
   return body;
 }

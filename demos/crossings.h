@@ -159,8 +159,9 @@ class CrossingCounter {
   const Topology& topology(std::size_t b, const CrossingMesh& mesh);
   /// Appends a body's items at positions x to the arrays of the call: when some position is not
   /// finite, the triangles touching one are left out (an empty box) and the edges they own become
-  /// lone edges if they are finite.
-  BodyItems addItems(const Topology& topo, const std::vector<Vec3>& x, ItemSpan& span);
+  /// lone edges if they are finite. Their boxes go into `span` unless it is null (the caller then
+  /// decides later which items go into the grid).
+  BodyItems addItems(const Topology& topo, const std::vector<Vec3>& x, ItemSpan* span);
   /// Calls pair(i, j) once for every two items whose boxes (boxes_; an empty one is not in the
   /// grid) meet and which share no vertex: no entry of vertices(i) is one of vertices(j).
   template <class Vertices, class Pair>
