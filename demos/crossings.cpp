@@ -422,18 +422,21 @@ std::size_t CrossingCounter::edgeCrossings(const std::vector<CrossingMesh>& mesh
 }
 
 std::size_t CrossingCounter::selfEdgeCrossings(const std::vector<CrossingMesh>& meshes, const BodyPositions& x) {
-  if (topology_.size() < meshes.size()) topology_.resize(meshes.size());
   std::size_t count = 0;
-  for (std::size_t b = 0; b < meshes.size(); ++b) {
-    left_out_.clear();
-    lone_.clear();
-    vertex_boxes_.clear();
-    boxes_.clear();
-    ItemSpan span;
-    const BodyItems body = addItems(topology(b, meshes[b]), x[b], &span);
-    count += selfCrossingsOf(body, span);
-  }
+  for (std::size_t b = 0; b < meshes.size(); ++b) count += selfEdgeCrossings(meshes, x, b);
   return count;
+}
+
+std::size_t CrossingCounter::selfEdgeCrossings(const std::vector<CrossingMesh>& meshes, const BodyPositions& x,
+                                               std::size_t b) {
+  if (topology_.size() < meshes.size()) topology_.resize(meshes.size());
+  left_out_.clear();
+  lone_.clear();
+  vertex_boxes_.clear();
+  boxes_.clear();
+  ItemSpan span;
+  const BodyItems body = addItems(topology(b, meshes[b]), x[b], &span);
+  return selfCrossingsOf(body, span);
 }
 
 CrossingCounter::ItemSpan::ItemSpan() : lo(FloatRow::Constant(kFloatInf)), hi(-lo) {}

@@ -73,6 +73,8 @@ class CrossingCounter {
   /// each once, summed over the bodies. Per body: the pairs whose triangle shares a vertex with
   /// the edge's owner from the topology, the others from a grid over the body's triangles.
   std::size_t selfEdgeCrossings(const std::vector<CrossingMesh>& meshes, const BodyPositions& x);
+  /// The same for body b alone.
+  std::size_t selfEdgeCrossings(const std::vector<CrossingMesh>& meshes, const BodyPositions& x, std::size_t b);
 
   /// Vertices v of some body A for which vertexTunnels holds against at least one triangle of a
   /// body B ≠ A between `before` and `after`, leaving out the vertices with skip[A][v] ≠ 0 (skip

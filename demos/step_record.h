@@ -16,8 +16,9 @@ struct StepTimes {
   /// not the pipeline's.
   double hooks = 0.0;
   double truth = 0.0;            ///< of `hooks`: the ground truth
-  /// Of `hooks`: the crossing and tunnelling counts (positions copied before the step, counted
-  /// after it).
+  /// Of `hooks`: the measurements after the step (crossing and tunnelling counts, and the
+  /// penetration unless it is off), on two threads (Run::measureAfterStep), and the positions
+  /// copied before the step for them.
   double crossings = 0.0;
   double detect = 0.0;           ///< whole performDiscreteCollisionDetection (a cross-check)
   /// Bullet's face-tree refit, split out of btSoftBody::predictMotion (TimedSoftBodySolver). The
