@@ -189,8 +189,8 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
 }
 
 #if defined(__SSE2__)
-/// streamBoxes for the common step: single-precision positions, the radius bound, no rest fit and
-/// no packed copy (Bullet's nodes). Everything stays in single precision, four lanes (x, y, z, 0):
+/// streamBoxes for the common step: single-precision positions, the radius bound and no rest fit
+/// (Bullet's nodes); with `copy`, the packed copy of the positions as streamBoxes makes it. Everything stays in single precision, four lanes (x, y, z, 0):
 /// the boxes are the same values as streamBoxes's (min and max only pick coordinates); the squared
 /// motion is rounded in single precision and raised by 1e-6 relative, so never below the double
 /// value; a NaN is caught by an unordered compare, an infinity by the boxes' or the motion's check.
@@ -204,7 +204,7 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
 /// is thrown away.
 template <typename Slot>
 void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev,
-                      std::size_t prev_stride, std::vector<MotionBox>& boxes, double& sum) {
+                      std::size_t prev_stride, std::vector<MotionBox>& boxes, double& sum, float* copy) {
   const std::size_t n = ch.chunk_of.size(), chunks = ch.count();
   const std::uint8_t* slots = ch.foreign.slotData();
   // Per chunk, lo = (x, y, z, 0) and hi = (x, y, z, squared motion of its own vertices).
@@ -234,6 +234,7 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
     if (c == kInvalidIndex) continue;
     // x, y and z without reading past them (the view's records may end right after z).
     const float* p = reinterpret_cast<const float*>(base + v * stride);
+    if (copy != nullptr) std::memcpy(copy + 3 * v, p, 3 * sizeof(float));
     const __m128 xy = load2(p);
     const __m128 z = _mm_load_ss(p + 2);
     const __m128 xv = _mm_movelh_ps(xy, z);  // (x, y, z, 0)
@@ -282,17 +283,102 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
 #endif
 
 // Area and longest edge of the triangles a chunk owns, from the refit's packed copy of the positions.
+// Every operation is written out, in the order measureChunkAvx2 repeats lane by lane: the cross
+// product as Eigen's, squared norms as (x² + y²) + z², each area added in the triangles' order.
+inline void measureTriangle(const Vec3& a, const Vec3& b, const Vec3& c, double& area, double& max_edge2) {
+  const Vec3 ab = b - a, ac = c - a, bc = c - b;
+  const double nx = ab.y() * ac.z() - ab.z() * ac.y(), ny = ab.z() * ac.x() - ab.x() * ac.z(),
+               nz = ab.x() * ac.y() - ab.y() * ac.x();
+  area += 0.5 * std::sqrt((nx * nx + ny * ny) + nz * nz);
+  const auto norm2 = [](const Vec3& e) { return (e.x() * e.x() + e.y() * e.y()) + e.z() * e.z(); };
+  max_edge2 = std::max({max_edge2, norm2(ab), norm2(ac), norm2(bc)});
+}
+
 template <typename T>
 void measureChunk(const ChunkLists& ch, Index chunk, const char* base, std::size_t stride, double& area,
                   double& max_edge2) {
   for (std::size_t k = ch.triangle_begin[chunk]; k < ch.triangle_begin[chunk + 1]; ++k) {
     const Triangle tri = ch.triangle(chunk, k);
-    const Vec3 a = load<T>(base, stride, tri[0]), b = load<T>(base, stride, tri[1]), c = load<T>(base, stride, tri[2]);
-    const Vec3 ab = b - a, ac = c - a, bc = c - b;
-    area += 0.5 * ab.cross(ac).norm();
-    max_edge2 = std::max({max_edge2, ab.squaredNorm(), ac.squaredNorm(), bc.squaredNorm()});
+    measureTriangle(load<T>(base, stride, tri[0]), load<T>(base, stride, tri[1]), load<T>(base, stride, tri[2]), area,
+                    max_edge2);
   }
 }
+
+#if defined(PSC_HAVE_AVX2_PATH)
+/// (x² + y²) + z², lane by lane.
+[[gnu::target("avx2")]] inline __m256d squaredNorms(__m256d x, __m256d y, __m256d z) {
+  return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(x, x), _mm256_mul_pd(y, y)), _mm256_mul_pd(z, z));
+}
+
+/// row[at[0..3]]. (The masked gather with every lane on: GCC 12 warns about the unmasked one's
+/// undefined source.)
+[[gnu::target("avx2")]] inline __m256d gather(const double* row, __m128i at) {
+  return _mm256_mask_i32gather_pd(_mm256_setzero_pd(), row, at, _mm256_castsi256_pd(_mm256_set1_epi64x(-1)), 8);
+}
+
+/// measureChunk on single-precision packed positions, four triangles at a time (AVX2, chosen at
+/// run time). The chunk's vertex table is first read into `table` (x, y, z rows in double), so
+/// each corner is one load from there; each lane does measureChunk's operations in its order, and
+/// the areas are added one by one in the triangles' order: the same bits.
+[[gnu::target("avx2")]] void measureChunkAvx2(const ChunkLists& ch, Index chunk, const float* copy,
+                                              std::vector<double>& table, double& area, double& max_edge2) {
+  using V = __m256d;
+  const Index* t = ch.table.data() + ch.table_begin[chunk];
+  const std::size_t n = ch.table_begin[chunk + 1] - ch.table_begin[chunk];
+  table.resize(3 * n);
+  double* tx = table.data();
+  double* ty = tx + n;
+  double* tz = ty + n;
+  for (std::size_t i = 0; i < n; ++i) {
+    const float* p = copy + 3 * std::size_t{t[i]};
+    tx[i] = p[0];
+    ty[i] = p[1];
+    tz[i] = p[2];
+  }
+  const std::size_t begin = ch.triangle_begin[chunk], end = ch.triangle_begin[chunk + 1];
+  std::size_t k = begin;
+  V edge2 = _mm256_set1_pd(max_edge2);
+  for (; k + 4 <= end; k += 4) {
+    // Corner j of the four triangles, as positions in the table.
+    const auto corner = [&](int j) {
+      return _mm_setr_epi32(static_cast<int>(ch.corners[3 * k + j]), static_cast<int>(ch.corners[3 * (k + 1) + j]),
+                            static_cast<int>(ch.corners[3 * (k + 2) + j]), static_cast<int>(ch.corners[3 * (k + 3) + j]));
+    };
+    const __m128i ia = corner(0), ib = corner(1), ic = corner(2);
+    const V ax = gather(tx, ia), ay = gather(ty, ia), az = gather(tz, ia);
+    const V bx = gather(tx, ib), by = gather(ty, ib), bz = gather(tz, ib);
+    const V cx = gather(tx, ic), cy = gather(ty, ic), cz = gather(tz, ic);
+    const V abx = _mm256_sub_pd(bx, ax), aby = _mm256_sub_pd(by, ay), abz = _mm256_sub_pd(bz, az);
+    const V acx = _mm256_sub_pd(cx, ax), acy = _mm256_sub_pd(cy, ay), acz = _mm256_sub_pd(cz, az);
+    const V bcx = _mm256_sub_pd(cx, bx), bcy = _mm256_sub_pd(cy, by), bcz = _mm256_sub_pd(cz, bz);
+    const V nx = _mm256_sub_pd(_mm256_mul_pd(aby, acz), _mm256_mul_pd(abz, acy));
+    const V ny = _mm256_sub_pd(_mm256_mul_pd(abz, acx), _mm256_mul_pd(abx, acz));
+    const V nz = _mm256_sub_pd(_mm256_mul_pd(abx, acy), _mm256_mul_pd(aby, acx));
+    alignas(32) double a[4];
+    _mm256_store_pd(a, _mm256_mul_pd(_mm256_set1_pd(0.5), _mm256_sqrt_pd(squaredNorms(nx, ny, nz))));
+    area += a[0];
+    area += a[1];
+    area += a[2];
+    area += a[3];
+    edge2 = _mm256_max_pd(edge2, _mm256_max_pd(_mm256_max_pd(squaredNorms(abx, aby, abz), squaredNorms(acx, acy, acz)),
+                                               squaredNorms(bcx, bcy, bcz)));
+  }
+  alignas(32) double e[4];
+  _mm256_store_pd(e, edge2);
+  _mm256_zeroupper();  // as in collectMeetsAvx2: the SSE code after it runs with a clean state
+  max_edge2 = std::max({e[0], e[1], e[2], e[3]});
+  // The last triangles one at a time, from the table as above.
+  for (; k < end; ++k) {
+    const auto at = [&](std::size_t j) {
+      const Index i = ch.corners[3 * k + j];
+      return Vec3(tx[i], ty[i], tz[i]);
+    };
+    measureTriangle(at(0), at(1), at(2), area, max_edge2);
+  }
+}
+
+bool useAvx2Probes();
+#endif
 
 /// The rest-shape bound's set-up (rest spheres, region rest centroids; rotations to identity) when
 /// the body has none (its rest shape or chunks changed: Body::rest_fit was dropped), and the
@@ -466,13 +552,13 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
     if (b.rest_fit) b.rest_fit->filled = false;
     NoRestFit none;
 #if defined(__SSE2__)
-    if (is_float && !swept && cf == nullptr) {
+    if (is_float && !swept) {
       if (ch.foreign.slotWidth() == 1)
-        streamBoxesFloat<std::uint8_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
+        streamBoxesFloat<std::uint8_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum, cf);
       else if (ch.foreign.slotWidth() == 2)
-        streamBoxesFloat<std::uint16_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
+        streamBoxesFloat<std::uint16_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum, cf);
       else
-        streamBoxesFloat<std::uint32_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum);
+        streamBoxesFloat<std::uint32_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum, cf);
     } else
 #endif
     if (is_float)
@@ -510,8 +596,18 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
   }
   if (measure) {
     double max_edge2 = 0.0;
+#if defined(PSC_HAVE_AVX2_PATH)
+    const bool avx2 = is_float && useAvx2Probes();
+    thread_local std::vector<double> table;
+#endif
     for (std::size_t c = 0; c < ch.count(); ++c) {
       double& area = b.shape.region_area[ch.region_of[c]];
+#if defined(PSC_HAVE_AVX2_PATH)
+      if (avx2) {
+        measureChunkAvx2(ch, static_cast<Index>(c), cf, table, area, max_edge2);
+        continue;
+      }
+#endif
       if (is_float)
         measureChunk<float>(ch, static_cast<Index>(c), reinterpret_cast<const char*>(cf), 3 * sizeof(float), area,
                             max_edge2);

@@ -89,6 +89,25 @@ TEST(ForeignChunks, HoldEveryCornerOfTheChunksOwnedTrianglesOnATorus) {
             << " with more than two\n";
 }
 
+// A mesh's vertices jittered by up to ±j (x) and their previous positions jittered again (q), in
+// double and as Bullet-like node records: per vertex (x, y, z, pad, qx, qy, qz, pad) in single
+// precision.
+std::vector<std::array<float, 8>> jitteredRecords(const TriMesh& m, unsigned seed, double j, std::vector<Vec3>& x,
+                                                  std::vector<Vec3>& q) {
+  const std::size_t n = m.vertices.size();
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> jitter(-j, j);
+  std::vector<std::array<float, 8>> f(n);
+  x.resize(n);
+  q.resize(n);
+  for (std::size_t v = 0; v < n; ++v) {
+    x[v] = m.vertices[v] + Vec3(jitter(rng), jitter(rng), jitter(rng));
+    q[v] = x[v] + Vec3(jitter(rng), jitter(rng), jitter(rng));
+    f[v] = {float(x[v].x()), float(x[v].y()), float(x[v].z()), 0.f, float(q[v].x()), float(q[v].y()), float(q[v].z()), 0.f};
+  }
+  return f;
+}
+
 // The refit's boxes against brute force on a jittered torus in Bullet-like records (single
 // precision positions inside larger records, the previous ones beside them), in the fast
 // single-precision pass and the generic one (double positions; with --swept): every chunk's box
@@ -99,16 +118,8 @@ TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
   for (const std::size_t resolution : {2000u, 20000u}) {
     const TriMesh m = makeTorus(1.0, 0.3, resolution);
     const std::size_t n = m.vertices.size();
-    std::mt19937 rng(11);
-    std::uniform_real_distribution<double> jitter(-0.02, 0.02);
-    // Per vertex (x, y, z, pad, qx, qy, qz, pad): the records of a Bullet-like node.
-    std::vector<std::array<float, 8>> f(n);
-    std::vector<Vec3> x(n), q(n);
-    for (std::size_t v = 0; v < n; ++v) {
-      x[v] = m.vertices[v] + Vec3(jitter(rng), jitter(rng), jitter(rng));
-      q[v] = x[v] + Vec3(jitter(rng), jitter(rng), jitter(rng));
-      f[v] = {float(x[v].x()), float(x[v].y()), float(x[v].z()), 0.f, float(q[v].x()), float(q[v].y()), float(q[v].z()), 0.f};
-    }
+    std::vector<Vec3> x, q;
+    const std::vector<std::array<float, 8>> f = jitteredRecords(m, 11, 0.02, x, q);
     const MeshTopology topo(m.triangles, n);
     std::vector<Index> region_of(n);
     for (std::size_t v = 0; v < n; ++v) region_of[v] = m.vertices[v].x() < 0.0 ? 0 : 1;
@@ -147,6 +158,56 @@ TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
         EXPECT_EQ(outside, 0u) << resolution << (single ? " single" : " double") << (swept ? " swept" : "");
         EXPECT_EQ(short_motion, 0u) << resolution << (single ? " single" : " double");
       }
+    }
+  }
+}
+
+// The repartition check's measures from the refit's pass (measure = true): each region's area is
+// the sum of its chunks' triangle areas and max_edge the longest triangle edge, against Eigen's
+// own cross products and norms on the positions as read (a relative 1e-12 for the sums, whose
+// order differs); single-precision records go through the fast pass and, with AVX2, through four
+// triangles at a time, which must give the scalar path's very bits.
+TEST(ForeignChunks, RefitMeasuresRegionAreasAndTheLongestEdge) {
+  for (const std::size_t resolution : {2000u, 20000u}) {
+    const TriMesh m = makeTorus(1.0, 0.3, resolution);
+    const std::size_t n = m.vertices.size();
+    std::vector<Vec3> x, q;
+    const std::vector<std::array<float, 8>> f = jitteredRecords(m, 5, 0.03, x, q);
+    const MeshTopology topo(m.triangles, n);
+    std::vector<Index> region_of(n);
+    for (std::size_t v = 0; v < n; ++v) region_of[v] = m.vertices[v].x() < 0.0 ? 0 : m.vertices[v].y() < 0.0 ? 1 : 2;
+    for (const bool single : {true, false}) {
+      std::vector<double> areas[2];
+      double edges[2] = {0.0, 0.0};
+      for (const bool avx2 : {true, false}) {
+        allowAvx2Probes(avx2);
+        Body b;
+        b.positions = single ? PositionView(f[0].data(), n, sizeof f[0]) : PositionView::of(x);
+        b.chunks = buildChunks(topo, b.positions, region_of, 3, 32);
+        b.particle_vertex = {0, 1, 2};
+        refitBounds(b, true, false);
+        allowAvx2Probes(true);
+        const ChunkLists& ch = b.chunks;
+        std::vector<double> brute(3, 0.0);
+        double longest = 0.0;
+        for (Index c = 0; c < ch.count(); ++c)
+          for (std::size_t k = ch.triangle_begin[c]; k < ch.triangle_begin[c + 1]; ++k) {
+            const Triangle t = ch.triangle(c, k);
+            const Vec3 u0 = b.positions[t[0]], u1 = b.positions[t[1]], u2 = b.positions[t[2]];
+            brute[ch.region_of[c]] += 0.5 * (u1 - u0).cross(u2 - u0).norm();
+            longest = std::max({longest, (u1 - u0).norm(), (u2 - u0).norm(), (u2 - u1).norm()});
+          }
+        ASSERT_EQ(b.shape.region_area.size(), 3u);
+        for (int r = 0; r < 3; ++r) {
+          EXPECT_GT(brute[r], 0.5) << r;
+          EXPECT_NEAR(b.shape.region_area[r], brute[r], 1e-12 * brute[r]) << resolution << " region " << r;
+        }
+        EXPECT_NEAR(b.shape.max_edge, longest, 1e-12 * longest) << resolution;
+        areas[avx2 ? 1 : 0] = b.shape.region_area;
+        edges[avx2 ? 1 : 0] = b.shape.max_edge;
+      }
+      for (int r = 0; r < 3; ++r) EXPECT_EQ(areas[0][r], areas[1][r]) << resolution << " region " << r;
+      EXPECT_EQ(edges[0], edges[1]) << resolution;
     }
   }
 }
