@@ -313,7 +313,7 @@ class Run {
   std::set<PairKey> truth_pairs_, found_pairs_;
   std::vector<CrossingMesh> crossing_meshes_;  ///< body i = scene.bodies[i]'s triangles
   CrossingCounter crossings_;
-  CrossingCounter self_crossings_;  ///< its own buffers: it counts on a second thread (measureCrossings)
+  CrossingCounter self_crossings_;  ///< its own buffers: it counts on a second thread (measureAfterStep)
   /// Node positions before the step, copied before stepSimulation: m_q is the step's start only
   /// until Bullet's drift solve (diterations > 0) overwrites it.
   BodyPositions before_, after_;

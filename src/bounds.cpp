@@ -190,10 +190,11 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
 
 #if defined(__SSE2__)
 /// streamBoxes for the common step: single-precision positions, the radius bound and no rest fit
-/// (Bullet's nodes); with `copy`, the packed copy of the positions as streamBoxes makes it. Everything stays in single precision, four lanes (x, y, z, 0):
-/// the boxes are the same values as streamBoxes's (min and max only pick coordinates); the squared
-/// motion is rounded in single precision and raised by 1e-6 relative, so never below the double
-/// value; a NaN is caught by an unordered compare, an infinity by the boxes' or the motion's check.
+/// (Bullet's nodes); with `copy`, the packed copy of the positions as streamBoxes makes it.
+/// Everything stays in single precision, four lanes (x, y, z, 0): the boxes are the same values as
+/// streamBoxes's (min and max only pick coordinates); the squared motion is rounded in single
+/// precision and raised by 1e-6 relative, so never below the double value; a NaN is caught by an
+/// unordered compare, an infinity by the boxes' or the motion's check.
 /// On 8 tori × 50,000 vertices the refit went from 3.42 to 3.16 ms a step with the boxes alone
 /// packed, to about 3.06 ms with the motion too, and to 2.90–2.94 with the motion carried in the
 /// upper box's fourth lane and one prefetch for Bullet's node (m_x and m_q share a cache line)
