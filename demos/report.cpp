@@ -83,7 +83,7 @@ MachineInfo machineInfo() {
 
 std::string machineLine(const MachineInfo& m) {
   return m.date + ", " + std::to_string(m.cores) + " cores (" + (m.cpu.empty() ? "cpu unknown" : m.cpu) +
-         "), runs single-threaded, " + m.build_type + " build, " + m.compiler + ", Bullet " + m.bullet_version + " (" +
+         "), pipelines single-threaded, " + m.build_type + " build, " + m.compiler + ", Bullet " + m.bullet_version + " (" +
          m.bullet_precision + " precision)";
 }
 

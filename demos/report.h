@@ -16,7 +16,7 @@ namespace psc::demo {
 struct MachineInfo {
   unsigned cores = 0;
   std::string cpu, compiler, build_type, bullet_version, bullet_precision, date;
-  int threads = 1;  ///< the runs are single-threaded
+  int threads = 1;  ///< the pipelines run single-threaded (the measurements between steps use a second thread)
 };
 MachineInfo machineInfo();
 
