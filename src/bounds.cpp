@@ -305,6 +305,12 @@ void measureChunk(const ChunkLists& ch, Index chunk, const char* base, std::size
   }
 }
 
+std::atomic<bool> g_avx2_allowed{true};  ///< allowAvx2Probes
+
+#if defined(PSC_HAVE_AVX2_PATH)
+bool useAvx2Probes() { return g_avx2_allowed.load(std::memory_order_relaxed) && avx2ProbesAvailable(); }
+#endif
+
 #if defined(PSC_HAVE_AVX2_PATH)
 /// (x² + y²) + z², lane by lane.
 [[gnu::target("avx2")]] inline __m256d squaredNorms(__m256d x, __m256d y, __m256d z) {
@@ -379,7 +385,6 @@ void measureChunk(const ChunkLists& ch, Index chunk, const char* base, std::size
   }
 }
 
-bool useAvx2Probes();
 #endif
 
 /// The rest-shape bound's set-up (rest spheres, region rest centroids; rotations to identity) when
@@ -1259,12 +1264,6 @@ struct FilterDistance4 {
     _mm256_zeroupper();  // as in collectMeetsAvx2: the SSE code after it runs with a clean state
   }
 };
-#endif
-
-std::atomic<bool> g_avx2_allowed{true};  ///< allowAvx2Probes
-
-#if defined(PSC_HAVE_AVX2_PATH)
-bool useAvx2Probes() { return g_avx2_allowed.load(std::memory_order_relaxed) && avx2ProbesAvailable(); }
 #endif
 
 /// MotionBound::Radius: of the pending pairs (in order), those whose vertex lies within its reach of
