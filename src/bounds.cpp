@@ -309,9 +309,7 @@ std::atomic<bool> g_avx2_allowed{true};  ///< allowAvx2Probes
 
 #if defined(PSC_HAVE_AVX2_PATH)
 bool useAvx2Probes() { return g_avx2_allowed.load(std::memory_order_relaxed) && avx2ProbesAvailable(); }
-#endif
 
-#if defined(PSC_HAVE_AVX2_PATH)
 /// (x² + y²) + z², lane by lane.
 [[gnu::target("avx2")]] inline __m256d squaredNorms(__m256d x, __m256d y, __m256d z) {
   return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(x, x), _mm256_mul_pd(y, y)), _mm256_mul_pd(z, z));
