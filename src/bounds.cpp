@@ -909,11 +909,19 @@ struct PairContext {
   /// per vertex of vb (by id) the least squared distance kept so far (+infinity: none yet).
   std::vector<double>* out_d2 = nullptr;
   double* best2 = nullptr;
+  /// With out_d2: each candidate's owned-triangle index in tb's chunks, parallel to `out`
+  /// (NearestSeeds).
+  std::vector<Index>* out_k = nullptr;
 };
 
 /// SensorSettings::nearest_candidates keeps a vertex's candidates within this factor of its least
 /// squared distance (a relative 1e-4 on the distance, rounded up).
 constexpr double kNearestBand2 = 1.0 + 2.1e-4;
+
+/// The distance past which no box can hold a triangle in the band of a vertex whose nearest so far
+/// is at squared distance `best2` (a little wider than the band, for the rounding of the box
+/// distance against the exact one); +infinity while there is none.
+inline double nearestBand(double best2) { return std::sqrt(best2 * (kNearestBand2 + 1e-5)); }
 
 /// Self-collision's exclusion rule: the triangle holds the vertex, or the two were within the
 /// exclusion distance in the body's rest shape.
@@ -954,7 +962,12 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
       x = 0.5 * (x + q);
     }
     const double xn = ctx.axis.valid ? ctx.axis.project(x) : 0.0;
-    ctx.s.verts[at + k] = {x, r, xn, v, swept ? 0.0 : reachOf(x, r)};
+    const double reach2 = swept ? 0.0 : reachOf(x, r);
+    // nearest_candidates: the probes need not reach past the band of the vertex's nearest so far
+    // (the same bound chunkCandidates puts on each probe), so neither do the picking and the
+    // kept-triangle box.
+    if (ctx.best2 != nullptr && ctx.ahead_steps == 0.0) r = std::min(r, nearestBand(ctx.best2[v]));
+    ctx.s.verts[at + k] = {x, r, xn, v, reach2};
     lanes.x[at + k] = x.x();
     lanes.y[at + k] = x.y();
     lanes.z[at + k] = x.z();
@@ -1280,6 +1293,8 @@ void keepWithinReach(const PairContext& ctx, const VertexRec* recs) {
   std::vector<double>* dist = ctx.out_d2;
   if (dist != nullptr) dist->resize(first + n);
   double* out_d2 = dist != nullptr ? dist->data() + first : nullptr;
+  if (ctx.out_k != nullptr) ctx.out_k->resize(first + n);
+  Index* out_k = ctx.out_k != nullptr ? ctx.out_k->data() + first : nullptr;
   std::size_t kept = 0;
   std::size_t not_nearest = 0;
   const auto decide = [&](std::size_t at, double d2) {
@@ -1288,6 +1303,7 @@ void keepWithinReach(const PairContext& ctx, const VertexRec* recs) {
     bool keep = d2 < vr.reach2;
     if (out_d2 != nullptr) {
       out_d2[kept] = d2;
+      if (out_k != nullptr) out_k[kept] = s.corners[s.pending[at].second].k;
       // Within reach but outside the band of the vertex's nearest so far: the final pass would
       // drop it too (the least only falls).
       double& best = ctx.best2[vr.v];
@@ -1322,6 +1338,7 @@ void keepWithinReach(const PairContext& ctx, const VertexRec* recs) {
   }
   ctx.out.resize(first + kept);
   if (dist != nullptr) dist->resize(first + kept);
+  if (ctx.out_k != nullptr) ctx.out_k->resize(first + kept);
   ctx.counters.candidates_beyond_reach += n - kept - not_nearest;
   ctx.counters.candidates_not_nearest += not_nearest;
   s.pending.clear();
@@ -1535,8 +1552,7 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
       // nearest_candidates: a triangle farther than the band of the vertex's nearest so far is no
       // candidate, and its box is no farther than it (the bound a little wider than the band, for
       // the rounding of the box distance against the exact one).
-      const double band = std::sqrt(ctx.best2[vr.v] * (kNearestBand2 + 1e-5));
-      pr.r = std::min(pr.r, band);
+      pr.r = std::min(pr.r, nearestBand(ctx.best2[vr.v]));
     }
     double n_lo = sensors ? vr.xn - vr.r : -std::numeric_limits<double>::infinity();
     double n_hi = sensors ? vr.xn + vr.r : std::numeric_limits<double>::infinity();
@@ -1645,20 +1661,32 @@ struct Group {
   BodyId vb, tb;
   std::vector<std::uint64_t> keys;
   std::vector<double> d2;  ///< CullParams::nearest: each key's squared distance
+  std::vector<Index> k;    ///< CullParams::seeds: each key's owned-triangle index (PairContext::out_k)
 
   /// CullParams::nearest: keeps, in order, the keys within a relative 1e-4 of their vertex's least
   /// distance (kNearestBand2 on the squares). `least` is the table by vertex id that collected them
   /// (PairContext::best2: each vertex's least kept distance, +infinity for the others); it is all
-  /// +infinity again on return. Returns how many went.
-  std::size_t keepNearest(std::vector<double>& least) {
+  /// +infinity again on return. Returns how many went. With `seeds` (and `k` collected), each
+  /// vertex's first kept key goes there as (vertex, owned-triangle index): NearestSeeds.
+  std::size_t keepNearest(std::vector<double>& least, std::vector<std::pair<Index, Index>>* seeds = nullptr) {
     std::size_t out = 0;
+    const bool with_k = seeds != nullptr && k.size() == keys.size();
     for (std::size_t i = 0; i < keys.size(); ++i)
-      if (d2[i] <= least[keys[i] >> 32] * kNearestBand2) keys[out++] = keys[i];
+      if (d2[i] <= least[keys[i] >> 32] * kNearestBand2) {
+        if (with_k) k[out] = k[i];
+        keys[out++] = keys[i];
+      }
     // Each vertex met keeps its nearest key, so the kept keys reach every entry collection set.
-    for (std::size_t i = 0; i < out; ++i) least[keys[i] >> 32] = std::numeric_limits<double>::infinity();
+    const double inf = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < out; ++i) {
+      double& l = least[keys[i] >> 32];
+      if (with_k && l != inf) seeds->emplace_back(static_cast<Index>(keys[i] >> 32), k[i]);
+      l = inf;
+    }
     const std::size_t gone = keys.size() - out;
     keys.resize(out);
     d2.clear();
+    k = std::vector<Index>{};
     return gone;
   }
 };
@@ -1689,21 +1717,35 @@ class Collector {
     regionItems(A, boxB, s_.items_a);
     if (s_.items_a.empty()) return;
     regionItems(B, boxA, s_.items_b);
-    Group ab{A.id, B.id, {}, {}}, ba{B.id, A.id, {}, {}};
+    Group ab{A.id, B.id, {}, {}, {}}, ba{B.id, A.id, {}, {}, {}};
+    // NearestSeeds: only on the radius bound (Ahead's probes test the paths ahead instead).
+    const bool seeded = params_.nearest && params_.seeds != nullptr && ahead_steps == 0.0;
     if (params_.nearest) {
       const double inf = std::numeric_limits<double>::infinity();
       if (least_.size() < A.chunks.chunk_of.size()) least_.resize(A.chunks.chunk_of.size(), inf);
       if (least_b_.size() < B.chunks.chunk_of.size()) least_b_.resize(B.chunks.chunk_of.size(), inf);
+      if (seeded) {
+        seedNearest(A, B, least_, seeded_a_);
+        seedNearest(B, A, least_b_, seeded_b_);
+      }
     }
     region_pairs_.clear();
     sweepBetween(s_.items_a, s_.items_b, [&](Index ri, Index rj) { region_pairs_.emplace_back(ri, rj); });
     // Bullet's contact solver is Gauss-Seidel: contacts in mesh order (not in sweep order) keep
     // its result independent of the sweep axis and measured better on resting stacks.
     std::sort(region_pairs_.begin(), region_pairs_.end());
-    for (const auto& [ri, rj] : region_pairs_) regionPair(A, ri, B, rj, ab, ba, ahead_steps);
+    for (const auto& [ri, rj] : region_pairs_) regionPair(A, ri, B, rj, ab, ba, ahead_steps, seeded);
     if (params_.nearest) {
-      counters_.candidates_not_nearest += ab.keepNearest(least_);
-      counters_.candidates_not_nearest += ba.keepNearest(least_b_);
+      record_.clear();
+      counters_.candidates_not_nearest += ab.keepNearest(least_, seeded ? &record_ : nullptr);
+      if (seeded) recordNearest(A, B);
+      counters_.candidates_not_nearest += ba.keepNearest(least_b_, seeded ? &record_ : nullptr);
+      if (seeded) recordNearest(B, A);
+      // A seeded vertex left without candidates still holds its seed.
+      for (const Index v : seeded_a_) least_[v] = std::numeric_limits<double>::infinity();
+      for (const Index v : seeded_b_) least_b_[v] = std::numeric_limits<double>::infinity();
+      seeded_a_.clear();
+      seeded_b_.clear();
     }
     if (!ab.keys.empty()) groups.push_back(std::move(ab));
     if (!ba.keys.empty()) groups.push_back(std::move(ba));
@@ -1751,7 +1793,7 @@ class Collector {
     });
     std::sort(region_pairs_.begin(), region_pairs_.end());
     const double exclude = params_.self_rest_exclusion * radius;
-    Group g{X.id, X.id, {}, {}};
+    Group g{X.id, X.id, {}, {}, {}};
     const Axis no_axis;
     if (params_.nearest && least_.size() < X.chunks.chunk_of.size())
       least_.resize(X.chunks.chunk_of.size(), std::numeric_limits<double>::infinity());
@@ -1828,8 +1870,91 @@ class Collector {
   /// Group::keepNearest's tables by vertex id, for the two directions of a body pair
   /// (PairContext::best2 while collecting; +infinity between body pairs).
   std::vector<double> least_, least_b_;
+  /// NearestSeeds: the vertices whose least (least_, least_b_) holds a seed.
+  std::vector<Index> seeded_a_, seeded_b_;
+
+  /// Starts the nearest search of V's vertices against T from the last step's nearest triangles:
+  /// least[v] becomes the squared distance to them now, in the very arithmetic of the candidate
+  /// filter (the same corners in the same order, filterDistance2x4), rounded up by a relative
+  /// 1e-12. The triangle is T's, so the vertex's nearest candidate is at most that far: every
+  /// candidate past the band of the seed would be dropped by keepNearest anyway, and the seed's own
+  /// triangle, if within reach, is found again (its box is within the seed's distance), so
+  /// keepNearest's least is the one it would be without the seed.
+  void seedNearest(const Body& V, const Body& T, std::vector<double>& least, std::vector<Index>& seeded) {
+    const NearestSeeds::Pair* p = params_.seeds->find(V.id, T.id);
+    if (p == nullptr || p->v_partition != V.partition_number || p->t_partition != T.partition_number) return;
+    const ChunkLists& ch = T.chunks;
+    const Index owned = ch.triangle_begin.back();
+    Vec3 at[4][4];
+    const Vec3 *pp[4], *pa[4], *pb[4], *pc[4];
+    for (int l = 0; l < 4; ++l) pp[l] = &at[l][0], pa[l] = &at[l][1], pb[l] = &at[l][2], pc[l] = &at[l][3];
+    Index vs[4];
+    int n = 0;
+    const auto flush = [&] {
+      for (int l = n; l < 4; ++l)
+        for (int c = 0; c < 4; ++c) at[l][c] = at[0][c];
+      alignas(32) double d2[4];
+      filterDistance2x4(pp, pa, pb, pc, d2);
+      for (int l = 0; l < n; ++l) {
+        const double bound = d2[l] * (1.0 + 1e-12);
+        double& best = least[vs[l]];
+        if (!(bound < best)) continue;
+        if (best == std::numeric_limits<double>::infinity()) seeded.push_back(vs[l]);
+        best = bound;
+      }
+      n = 0;
+    };
+    for (const auto& [v, k] : p->seeds) {
+      if (v >= V.vertex_count || k >= owned) continue;  // cannot happen within one partition
+      const Index c = static_cast<Index>(std::upper_bound(ch.triangle_begin.begin(), ch.triangle_begin.end(), k) -
+                                         ch.triangle_begin.begin()) - 1;
+      const Triangle tri = ch.triangle(c, k);
+      at[n][0] = V.positions[v];
+      for (int j = 0; j < 3; ++j) at[n][j + 1] = T.positions[tri[static_cast<std::size_t>(j)]];
+      vs[n] = v;
+      if (++n == 4) flush();
+    }
+    if (n > 0) flush();
+    counters_.nearest_seeded += seeded.size();
+  }
+
+  /// record_ (the first kept key of each vertex of V against T) becomes the next step's seeds.
+  void recordNearest(const Body& V, const Body& T) {
+    if (!record_.empty()) {
+      NearestSeeds::Pair p;
+      p.vb = V.id;
+      p.tb = T.id;
+      p.v_partition = V.partition_number;
+      p.t_partition = T.partition_number;
+      std::vector<std::vector<std::pair<Index, Index>>>& spare = params_.seeds->spare;
+      if (!spare.empty()) {
+        p.seeds = std::move(spare.back());
+        spare.pop_back();
+      }
+      p.seeds.swap(record_);
+      params_.seeds->next.push_back(std::move(p));
+    }
+    record_.clear();
+  }
+  std::vector<std::pair<Index, Index>> record_;
+
+ public:
+  /// NearestSeeds: this step's seeds become the last step's (call once, after the body pairs).
+  void finishSeeds() {
+    NearestSeeds& n = *params_.seeds;
+    for (NearestSeeds::Pair& p : n.pairs) n.spare.push_back(std::move(p.seeds));
+    n.pairs.swap(n.next);
+    n.next.clear();
+    std::sort(n.pairs.begin(), n.pairs.end(), [](const NearestSeeds::Pair& x, const NearestSeeds::Pair& y) {
+      return x.vb != y.vb ? x.vb < y.vb : x.tb < y.tb;
+    });
+  }
+
+ private:
   /// `ahead_steps`: the body pair's PairContext::ahead_steps (0: not on the Ahead bound).
-  void regionPair(const Body& A, Index ri, const Body& B, Index rj, Group& ab, Group& ba, double ahead_steps) {
+  /// `seeded`: record each candidate's owned-triangle index (NearestSeeds).
+  void regionPair(const Body& A, Index ri, const Body& B, Index rj, Group& ab, Group& ba, double ahead_steps,
+                  bool seeded) {
     const double mf = params_.motion_factor;
     const Grown boxI = grown(A.region_box[ri], A.margin, mf);
     const Grown boxJ = grown(B.region_box[rj], B.margin, mf);
@@ -1867,10 +1992,10 @@ class Collector {
     const auto t0 = std::chrono::steady_clock::now();
     const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab.keys, counters_, s_,
                            -1.0, nullptr, ahead_steps, params_.nearest ? &ab.d2 : nullptr,
-                           params_.nearest ? least_.data() : nullptr};
+                           params_.nearest ? least_.data() : nullptr, seeded ? &ab.k : nullptr};
     const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba.keys, counters_, s_,
                            -1.0, nullptr, ahead_steps, params_.nearest ? &ba.d2 : nullptr,
-                           params_.nearest ? least_b_.data() : nullptr};
+                           params_.nearest ? least_b_.data() : nullptr, seeded ? &ba.k : nullptr};
     const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
     s_.items_a.clear();
     s_.items_b.clear();
@@ -2001,6 +2126,13 @@ bool avx2ProbesAvailable() {
 
 void allowAvx2Probes(bool allowed) { g_avx2_allowed.store(allowed, std::memory_order_relaxed); }
 
+const NearestSeeds::Pair* NearestSeeds::find(BodyId vb, BodyId tb) const {
+  const auto it = std::lower_bound(pairs.begin(), pairs.end(), std::make_pair(vb, tb), [](const Pair& p, const auto& key) {
+    return p.vb != key.first ? p.vb < key.first : p.tb < key.second;
+  });
+  return it != pairs.end() && it->vb == vb && it->tb == tb ? &*it : nullptr;
+}
+
 double filterDistance2(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
   return FilterDistance::of(p, a, b, c);
 }
@@ -2020,6 +2152,7 @@ void cullAndCollect(const std::vector<Body*>& bodies, const BodyPairs& pairs, co
                     std::vector<FlaggedPair>& flagged, std::vector<CandidatePair>& candidates, StepStats& counters) {
   Collector collect(params, flagged, counters);
   for (const auto& [i, j] : pairs) collect.bodyPair(*bodies[i], *bodies[j]);
+  if (params.nearest && params.seeds != nullptr) collect.finishSeeds();
   for (const Body* b : bodies)
     if (b->selfCollides()) collect.selfBody(*b);
 

@@ -27,6 +27,31 @@ namespace psc::detail {
 /// the rest-shape bound of the self-collision cull.
 void refitBounds(Body& b, bool measure, bool swept, bool rest_fit = false);
 
+/// SensorSettings::nearest_candidates: each vertex's nearest triangles of the last step, per
+/// ordered body pair. The next step's candidate stage starts each such vertex's search from its
+/// distance to them now: an upper bound on its nearest, so from its first probe the search skips
+/// what the band of its nearest would drop in the end (the same candidates, fewer tests).
+struct NearestSeeds {
+  struct Pair {
+    BodyId vb = kInvalidBody, tb = kInvalidBody;
+    /// Body::partition_number of each when recorded: a repartition renumbers tb's chunk
+    /// triangles, so the pair's seeds are then ignored.
+    std::uint64_t v_partition = 0, t_partition = 0;
+    std::vector<std::pair<Index, Index>> seeds;  ///< (vertex of vb, owned-triangle index in tb's chunks)
+  };
+  std::vector<Pair> pairs;  ///< the last step's, sorted by (vb, tb)
+  std::vector<Pair> next;   ///< this step's, while collecting
+  std::vector<std::vector<std::pair<Index, Index>>> spare;  ///< seed lists to reuse (no allocation per step)
+  const Pair* find(BodyId vb, BodyId tb) const;
+  /// The bytes of the seeds of vb's vertices (the spare lists not counted).
+  std::size_t bytes(BodyId vb) const {
+    std::size_t n = 0;
+    for (const Pair& p : pairs)
+      if (p.vb == vb) n += sizeof(Pair) + p.seeds.capacity() * sizeof(p.seeds[0]);
+    return n;
+  }
+};
+
 struct CullParams {
   double motion_factor = 2.0;  ///< MotionBound::Radius; 0 with `swept`
   bool swept = false;          ///< MotionBound::Swept
@@ -41,6 +66,8 @@ struct CullParams {
   double self_radius_edges = 1.0;    ///< SensorSettings::self_radius_edges
   bool self_rest_bound = true;       ///< SensorSettings::self_rest_bound
   bool nearest = false;              ///< SensorSettings::nearest_candidates (not with `swept`)
+  /// With `nearest`: the last step's nearest triangles (read), and this step's (written).
+  NearestSeeds* seeds = nullptr;
 };
 
 /// The pairs (i < j) of `bodies` whose grown body boxes overlap, by sort-and-sweep, sorted.

@@ -57,6 +57,8 @@ struct SensorWorld::Impl {
   detail::ThesisScratch thesis;
   /// SensorWorld::setPairAhead: body pairs (first < second), sorted.
   std::vector<std::pair<BodyId, BodyId>> ahead_pairs;
+  /// SensorSettings::nearest_candidates: each vertex's nearest triangles of the last step.
+  detail::NearestSeeds nearest_seeds;
 
   Body& get(BodyId id) {
     auto it = bodies.find(id);
@@ -532,6 +534,7 @@ const StepResult& SensorWorld::step() {
   params.self_radius_edges = w.settings.self_radius_edges;
   params.self_rest_bound = w.settings.self_rest_bound;
   params.nearest = w.settings.nearest_candidates && !params.swept;
+  if (params.nearest) params.seeds = &w.nearest_seeds;
   // [beyond] In the default mode a particle only serves the sensor decision of its region's pairs,
   // which exist only where the region's box reaches another body's: the other particles stay put
   // (and still pull).
@@ -640,7 +643,8 @@ std::size_t SensorWorld::memoryBytes(BodyId id) const {
          b.partition.code_vectors.capacity() * sizeof(b.partition.code_vectors[0]) +
          b.particle_vertex.capacity() * sizeof(Index) + b.chunks.bytes() +
          (b.chunk_box.capacity() + b.region_box.capacity()) * sizeof(detail::MotionBox) +
-         b.rest.capacity() * sizeof(Vec3) + (b.rest_fit ? sizeof(detail::RestFit) + b.rest_fit->bytes() : 0);
+         b.rest.capacity() * sizeof(Vec3) + (b.rest_fit ? sizeof(detail::RestFit) + b.rest_fit->bytes() : 0) +
+         impl_->nearest_seeds.bytes(id);
 }
 
 const MeshReport& SensorWorld::report(BodyId id) const { return impl_->get(id).report; }

@@ -128,7 +128,9 @@ struct SensorSettings {
   /// accepts every pair within the contact radius and a solver that keeps one contact per vertex
   /// (psc::bullet's Robust test with ContactSet::NearestFace sets it): the exact stage then sees
   /// about one pair per vertex instead of every triangle within the radius, and once a vertex's
-  /// nearest so far is known its probes skip the triangles beyond that band. StepStats counts the
+  /// nearest so far is known its probes skip the triangles beyond that band (from the first probe
+  /// on for a vertex that had candidates last step: its distance now to the triangle it kept then
+  /// starts the band, StepStats::nearest_seeded). StepStats counts the
   /// pairs measured and left out (candidates_not_nearest). MotionBound::Swept has no such distance, and the thesis's
   /// flag-only mode (Flagging::Sensors) no such filter: both ignore it.
   bool nearest_candidates = false;

@@ -94,6 +94,7 @@ struct StepStats {
   std::size_t candidate_triangles = 0;     ///< triangles examined (likewise)
   std::size_t candidate_probes = 0;        ///< (vertex, triangle) box tests made to find them
   std::size_t candidates_beyond_reach = 0; ///< pairs whose boxes meet but whose exact distance exceeds the radius (MotionBound::Radius)
+  std::size_t nearest_seeded = 0;           ///< SensorSettings::nearest_candidates: vertices whose search started from the distance to their last step's nearest triangles
   std::size_t candidates_not_nearest = 0;  ///< SensorSettings::nearest_candidates: pairs measured within reach and left out, farther than their vertex's nearest (not those its probes already skipped)
   std::size_t candidate_pairs = 0;         ///< unique pairs handed to the exact test
   std::size_t self_region_pairs = 0;       ///< region pairs of one body (self-collision) whose grown boxes overlap
@@ -195,8 +196,9 @@ class SensorWorld {
   std::vector<ParticleState> particles() const;  ///< all particles, by body then region
   std::size_t particleCount(BodyId id) const;
   std::size_t repartitionCount(BodyId id) const;  ///< times re-partitioned after the first
-  /// Bytes the midphase keeps for this body: chunks, boxes, regions, particles, and the full
-  /// topology while it is alive (no positions, no convex parts).
+  /// Bytes the midphase keeps for this body: chunks, boxes, regions, particles, the full
+  /// topology while it is alive and, with nearest_candidates, its vertices' last nearest triangles
+  /// (no positions, no convex parts).
   std::size_t memoryBytes(BodyId id) const;
   const MeshReport& report(BodyId id) const;
   const SensorSettings& settings() const;
