@@ -317,6 +317,9 @@ class Run {
   /// Node positions before the step, copied before stepSimulation: m_q is the step's start only
   /// until Bullet's drift solve (diterations > 0) overwrites it.
   BodyPositions before_, after_;
+  /// after_ holds the positions as they are now: copied by measureAfterStep, and nothing moves a
+  /// node between it and the next step, which then takes it as before_ instead of copying again.
+  bool after_current_ = false;
   std::vector<std::vector<char>> had_contact_;  ///< per body and node: in a soft-soft contact this step
   std::unique_ptr<FrameSeries> frames_;
   double far_out_ = 1.0;             ///< far enough out to mean the simulation blew up
@@ -400,7 +403,9 @@ void Run::step(StepRecord& rec) {
   current_ = &rec;
   ++steps_begun_;
   const auto c0 = Clock::now();
-  copyPositions(world_, before_);
+  if (after_current_) before_.swap(after_);
+  else copyPositions(world_, before_);
+  after_current_ = false;
   rec.ms.crossings = msSince(c0);
   const auto t0 = Clock::now();
   world_.step();
@@ -536,6 +541,7 @@ void Run::measureAfterStep(StepRecord& rec, bool penetration) {
   rec.n.tunnelled_vertices = crossings_.tunnelledVertices(crossing_meshes_, before_, after_, had_contact_);
   rec.n.self_edge_crossings = selfCounts(crossings_);
   rec.n.self_edge_crossings += helper.valid() ? helper.get() : second();
+  after_current_ = true;
   if (penetration) {
     rec.n.penetrating_vertices = pen.vertices;
     if (pen.vertices) rec.max_penetration = pen.max_depth;
