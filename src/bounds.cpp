@@ -1918,7 +1918,9 @@ class Collector {
     counters_.nearest_seeded += seeded.size();
   }
 
-  /// record_ (the first kept key of each vertex of V against T) becomes the next step's seeds.
+  /// record_ (the first kept key of each vertex of V against T) becomes the next step's seeds, in
+  /// the memory of the pair's last list (its seeding is done), so that a steady contact allocates
+  /// nothing; a list that shrank to under half its memory gets a new one of its size.
   void recordNearest(const Body& V, const Body& T) {
     if (!record_.empty()) {
       NearestSeeds::Pair p;
@@ -1926,12 +1928,9 @@ class Collector {
       p.tb = T.id;
       p.v_partition = V.partition_number;
       p.t_partition = T.partition_number;
-      std::vector<std::vector<std::pair<Index, Index>>>& spare = params_.seeds->spare;
-      if (!spare.empty()) {
-        p.seeds = std::move(spare.back());
-        spare.pop_back();
-      }
-      p.seeds.swap(record_);
+      if (NearestSeeds::Pair* last = params_.seeds->find(V.id, T.id)) p.seeds = std::move(last->seeds);
+      if (p.seeds.capacity() > 2 * record_.size()) p.seeds = std::vector<std::pair<Index, Index>>{};
+      p.seeds.assign(record_.begin(), record_.end());
       params_.seeds->next.push_back(std::move(p));
     }
     record_.clear();
@@ -1942,7 +1941,6 @@ class Collector {
   /// NearestSeeds: this step's seeds become the last step's (call once, after the body pairs).
   void finishSeeds() {
     NearestSeeds& n = *params_.seeds;
-    for (NearestSeeds::Pair& p : n.pairs) n.spare.push_back(std::move(p.seeds));
     n.pairs.swap(n.next);
     n.next.clear();
     std::sort(n.pairs.begin(), n.pairs.end(), [](const NearestSeeds::Pair& x, const NearestSeeds::Pair& y) {
@@ -2126,7 +2124,7 @@ bool avx2ProbesAvailable() {
 
 void allowAvx2Probes(bool allowed) { g_avx2_allowed.store(allowed, std::memory_order_relaxed); }
 
-const NearestSeeds::Pair* NearestSeeds::find(BodyId vb, BodyId tb) const {
+NearestSeeds::Pair* NearestSeeds::find(BodyId vb, BodyId tb) {
   const auto it = std::lower_bound(pairs.begin(), pairs.end(), std::make_pair(vb, tb), [](const Pair& p, const auto& key) {
     return p.vb != key.first ? p.vb < key.first : p.tb < key.second;
   });

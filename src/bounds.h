@@ -40,10 +40,10 @@ struct NearestSeeds {
     std::vector<std::pair<Index, Index>> seeds;  ///< (vertex of vb, owned-triangle index in tb's chunks)
   };
   std::vector<Pair> pairs;  ///< the last step's, sorted by (vb, tb)
-  std::vector<Pair> next;   ///< this step's, while collecting
-  std::vector<std::vector<std::pair<Index, Index>>> spare;  ///< seed lists to reuse (no allocation per step)
-  const Pair* find(BodyId vb, BodyId tb) const;
-  /// The bytes of the seeds of vb's vertices (the spare lists not counted).
+  std::vector<Pair> next;   ///< this step's, while collecting (each takes over its last list's memory)
+  Pair* find(BodyId vb, BodyId tb);
+  const Pair* find(BodyId vb, BodyId tb) const { return const_cast<NearestSeeds*>(this)->find(vb, tb); }
+  /// The bytes of the seeds of vb's vertices.
   std::size_t bytes(BodyId vb) const {
     std::size_t n = 0;
     for (const Pair& p : pairs)
