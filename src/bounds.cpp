@@ -1866,12 +1866,24 @@ class Collector {
     }
   }
 
+  /// NearestSeeds: this step's seeds become the last step's (call once, after the body pairs).
+  void finishSeeds() {
+    NearestSeeds& n = *params_.seeds;
+    n.pairs.swap(n.next);
+    n.next.clear();
+    std::sort(n.pairs.begin(), n.pairs.end(), [](const NearestSeeds::Pair& x, const NearestSeeds::Pair& y) {
+      return x.vb != y.vb ? x.vb < y.vb : x.tb < y.tb;
+    });
+  }
+
  private:
   /// Group::keepNearest's tables by vertex id, for the two directions of a body pair
   /// (PairContext::best2 while collecting; +infinity between body pairs).
   std::vector<double> least_, least_b_;
-  /// NearestSeeds: the vertices whose least (least_, least_b_) holds a seed.
+  /// NearestSeeds: the vertices whose least (least_, least_b_) holds a seed, and the seeds one
+  /// direction of a body pair records for the next step.
   std::vector<Index> seeded_a_, seeded_b_;
+  std::vector<std::pair<Index, Index>> record_;
 
   /// Starts the nearest search of V's vertices against T from the last step's nearest triangles:
   /// least[v] becomes the squared distance to them now, in the very arithmetic of the candidate
@@ -1935,20 +1947,7 @@ class Collector {
     }
     record_.clear();
   }
-  std::vector<std::pair<Index, Index>> record_;
 
- public:
-  /// NearestSeeds: this step's seeds become the last step's (call once, after the body pairs).
-  void finishSeeds() {
-    NearestSeeds& n = *params_.seeds;
-    n.pairs.swap(n.next);
-    n.next.clear();
-    std::sort(n.pairs.begin(), n.pairs.end(), [](const NearestSeeds::Pair& x, const NearestSeeds::Pair& y) {
-      return x.vb != y.vb ? x.vb < y.vb : x.tb < y.tb;
-    });
-  }
-
- private:
   /// `ahead_steps`: the body pair's PairContext::ahead_steps (0: not on the Ahead bound).
   /// `seeded`: record each candidate's owned-triangle index (NearestSeeds).
   void regionPair(const Body& A, Index ri, const Body& B, Index rj, Group& ab, Group& ba, double ahead_steps,
