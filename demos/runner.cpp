@@ -560,6 +560,7 @@ void Run::writeFrame(std::size_t step) {
     fb[b].x = bodies_[b].x;
     fb[b].triangles = &bodies_[b].triangles;
     fb[b].contact.assign(bodies_[b].x.size(), 0);
+    fb[b].self_contact.assign(bodies_[b].x.size(), 0);
     fb[b].missed.assign(bodies_[b].x.size(), 0);
     if (sensors_ && b < view.region_of.size() && !view.region_of[b].empty()) {
       fb[b].region = view.region_of[b];
@@ -576,6 +577,12 @@ void Run::writeFrame(std::size_t step) {
   for (const ContactKey& k : found_) {
     fb[k.vertex_body].contact[k.vertex] = 1;
     markTriangle(&FrameBody::contact, k.triangle_body, k.triangle);
+  }
+  for (const ContactKey& k : found_self_) {
+    fb[k.vertex_body].contact[k.vertex] = 1;
+    fb[k.vertex_body].self_contact[k.vertex] = 1;
+    markTriangle(&FrameBody::contact, k.triangle_body, k.triangle);
+    markTriangle(&FrameBody::self_contact, k.triangle_body, k.triangle);
   }
   if (last_truth_) {
     // Truth contacts of this step's collision pass (strict if asked, else full) not found.

@@ -103,6 +103,7 @@ void FrameSeries::writeFrame(std::size_t step, double time, const std::vector<Fr
     };
     perVertex("UInt8", "flagged", flag(&FrameBody::flagged));
     perVertex("UInt8", "contact", flag(&FrameBody::contact));
+    perVertex("UInt8", "self_contact", flag(&FrameBody::self_contact));
     perVertex("UInt8", "missed", flag(&FrameBody::missed));
     out << "</PointData>\n<CellData Scalars=\"body\">\n<DataArray type=\"Int32\" Name=\"body\" format=\"ascii\">\n";
     for (std::size_t b = 0; b < bodies.size(); ++b)

@@ -20,7 +20,8 @@ struct FrameBody {
   const std::vector<Triangle>* triangles = nullptr;
   std::vector<int> region;        ///< per vertex; empty = -1 everywhere
   std::vector<char> flagged;      ///< per vertex
-  std::vector<char> contact;      ///< per vertex
+  std::vector<char> contact;      ///< per vertex: in a contact found this step (with another body or itself)
+  std::vector<char> self_contact; ///< per vertex: in a contact found this step with its own body
   std::vector<char> missed;       ///< per vertex
 };
 

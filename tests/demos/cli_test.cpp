@@ -462,5 +462,50 @@ TEST(DemoCli, FramesAndPlots) {
   }
 }
 
+TEST(DemoCli, FramesColourTheSelfContacts) {
+  // tube_coil at 600 vertices makes its first self contacts before step 40: the sensors run's
+  // surface frames mark their vertices in `self_contact` (each also in `contact`); Bullet's run,
+  // which has no self-collision, marks none.
+  if (!SensorPipeline::available()) GTEST_SKIP() << "built without psc::bullet";
+  const fs::path dir = scratch("self_frames");
+  const Outcome o = run("--scene tube_coil --resolution 600 --steps 40 --pipeline both --self-collision --truth none "
+                        "--no-penetration --frames " + (dir / "f").string() + " --json " + (dir / "r.json").string());
+  ASSERT_TRUE(o.exited && o.code == 0) << o.output;
+  // The values of one per-vertex array of a surface frame.
+  const auto array = [](const std::string& text, const std::string& name) {
+    const std::size_t at = text.find("Name=\"" + name + "\"");
+    std::vector<int> values;
+    if (at == std::string::npos) return values;
+    std::istringstream in(text.substr(text.find('>', at) + 1, text.find("</DataArray>", at) - text.find('>', at) - 1));
+    for (int v; in >> v;) values.push_back(v);
+    return values;
+  };
+  std::size_t frames = 0, sensors_marked = 0, bullet_marked = 0;
+  for (const auto& e : fs::recursive_directory_iterator(dir / "f")) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind("surface_", 0) != 0) continue;
+    std::ifstream in(e.path());
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::vector<int> self = array(text, "self_contact"), contact = array(text, "contact");
+    ASSERT_FALSE(self.empty()) << e.path();
+    ASSERT_EQ(self.size(), contact.size()) << e.path();
+    std::size_t marked = 0;
+    for (std::size_t v = 0; v < self.size(); ++v) {
+      EXPECT_TRUE(self[v] == 0 || contact[v] == 1) << e.path() << " vertex " << v;
+      marked += self[v] == 1;
+    }
+    (e.path().parent_path().filename().string().find("bullet") != std::string::npos ? bullet_marked : sensors_marked) += marked;
+    ++frames;
+  }
+  EXPECT_EQ(frames, 2u * 40u);
+  EXPECT_EQ(bullet_marked, 0u);
+  const nlohmann::json report = readJson(dir / "r.json");
+  long self_found = 0;
+  for (const nlohmann::json& r : report.at("runs"))
+    if (r.at("pipeline").get<std::string>() == "sensors") self_found = r.at("self_contacts_found").get<long>();
+  ASSERT_GT(self_found, 0) << "the scene made no self contact in 40 steps";
+  EXPECT_GT(sensors_marked, 0u);
+}
+
 }  // namespace
 }  // namespace psc::demo
