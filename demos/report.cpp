@@ -160,6 +160,8 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   if (r.has_self_truth) {
     j["self_recall_strict"] = r.self_recall_strict;
     j["truth_self_strict_contacts"] = r.self_truth_strict_total;
+    j["self_recall_strict_all"] = r.self_recall_strict_all;
+    j["truth_self_strict_contacts_all"] = r.self_truth_strict_all_total;
     if (r.has_full) j["self_contacts_outside_truth"] = r.self_contacts_outside_truth;
   }
   if (r.has_strict) {
@@ -228,11 +230,11 @@ void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
   // The run column is as wide as the longest run name (Bullet's cluster runs), at least 8.
   int name_width = 8;
   for (const RunResult& r : runs) name_width = std::max(name_width, static_cast<int>(runName(r).size()));
-  const char* head = "%-12s %6s %4s %5s %-*s %15s %15s %6s %7s %8s %7s %8s %8s %6s %8s %7s %6s\n";
+  const char* head = "%-12s %6s %4s %5s %-*s %15s %15s %6s %7s %8s %7s %8s %8s %6s %8s %7s %6s %6s %8s %6s\n";
   char line[512];
   std::snprintf(line, sizeof line, head, "scene", "res", "bod", "steps", name_width, "pipeline", "strict all/wst",
                 "full all/wst", "pairs", "outside", "exact/st", "flag/st", "coll ms", "step ms", "B/ours", "max pen",
-                "pen n", "MB");
+                "pen n", "cross", "self-x", "self rec", "MB");
   out << line;
   for (const RunResult& r : runs) {
     const std::string strict = r.has_strict ? fixed(r.recall_strict, 4) + "/" + fixed(r.recall_strict_worst_step, 3) : "-";
@@ -245,6 +247,7 @@ void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
                                : r.pipeline == Pipeline::Bounds ? r.ratio_bullet_over_bounds
                                                                 : 0.0;
     const std::string ratio = b_over_ours > 0 ? fixed(b_over_ours, 2) : "";
+    const std::string self_recall = r.has_self_truth ? fixed(r.self_recall_strict, 4) : "-";
     std::snprintf(line, sizeof line, head, r.scene.c_str(), std::to_string(r.resolution).c_str(),
                   std::to_string(r.bodies).c_str(), std::to_string(r.steps).c_str(), name_width, runName(r).c_str(), strict.c_str(),
                   full.c_str(), pairs.c_str(), outside.c_str(), count(r.exact_tests_per_step).c_str(), flagged.c_str(),
@@ -252,7 +255,8 @@ void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
                   fixed(r.max_penetration, 3).c_str(),
                   (r.diverged_at_step >= 0 ? "DIV@" + std::to_string(r.diverged_at_step)
                                            : std::to_string(r.penetration_steps)).c_str(),
-                  fixed(r.peak_rss_mb, 0).c_str());
+                  std::to_string(r.intersections_max).c_str(), std::to_string(r.self_intersections_max).c_str(),
+                  self_recall.c_str(), fixed(r.peak_rss_mb, 0).c_str());
     out << line;
   }
 }

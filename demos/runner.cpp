@@ -461,10 +461,17 @@ void Run::compareWithSelfTruth(StepRecord& rec) {
   StepCounts& n = rec.n;
   for (const ContactKey& k : found_self_) {
     const TruthContact* c = tr.find(k);
-    if (c && c->strict == Membership::Inside && !untestable(k)) ++n.self_found_in_strict;
+    if (c && c->strict == Membership::Inside) {
+      ++n.self_found_in_strict_all;
+      if (!untestable(k)) ++n.self_found_in_strict;
+    }
     if (truth_settings_.full && (!c || c->full == Membership::Outside)) ++n.self_outside_truth;
   }
-  for (const TruthContact& c : tr.contacts) n.self_truth_strict += c.strict == Membership::Inside && !untestable(c.key);
+  for (const TruthContact& c : tr.contacts) {
+    if (c.strict != Membership::Inside) continue;
+    ++n.self_truth_strict_all;
+    if (!untestable(c.key)) ++n.self_truth_strict;
+  }
 }
 
 void Run::compareWithTruth(StepRecord& rec) {
@@ -657,6 +664,8 @@ void summariseCounts(RunResult& r) {
     r.self_contacts_found_total += n.self_contacts_found;
     r.self_truth_strict_total += n.self_truth_strict;
     r.self_found_in_strict += n.self_found_in_strict;
+    r.self_truth_strict_all_total += n.self_truth_strict_all;
+    r.self_found_in_strict_all += n.self_found_in_strict_all;
     r.self_contacts_outside_truth += n.self_outside_truth;
     r.tunnelled_total += n.tunnelled_vertices;
     r.tunnelled_worst_step = std::max(r.tunnelled_worst_step, n.tunnelled_vertices);
@@ -674,6 +683,8 @@ void summariseCounts(RunResult& r) {
   r.recall_full_worst_step = worst_full;
   r.self_recall_strict =
       r.self_truth_strict_total ? double(r.self_found_in_strict) / double(r.self_truth_strict_total) : 1.0;
+  r.self_recall_strict_all =
+      r.self_truth_strict_all_total ? double(r.self_found_in_strict_all) / double(r.self_truth_strict_all_total) : 1.0;
   r.pair_recall = r.truth_pairs_total ? double(r.truth_pairs_found) / double(r.truth_pairs_total) : 1.0;
   r.exact_tests_per_step = double(exact_total) / steps;
   r.flagged_pairs_per_step = double(flagged_total) / steps;

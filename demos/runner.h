@@ -156,6 +156,10 @@ struct RunResult {
   bool has_self_truth = false;
   double self_recall_strict = 1.0;
   std::size_t self_truth_strict_total = 0, self_found_in_strict = 0, self_contacts_outside_truth = 0;
+  /// The same over all pairs of the strict self truth, the triangles CollideVF_SS refuses included
+  /// (1.0 asks for ExactTest::Robust or Continuous where such triangles touch).
+  double self_recall_strict_all = 1.0;
+  std::size_t self_truth_strict_all_total = 0, self_found_in_strict_all = 0;
   std::size_t self_contacts_found_total = 0;
   /// Steps with a body pair over the plugin's runaway rule (psc::bullet::runawayContacts: bodies
   /// inside each other or too fast for the contact radius), and the first such warning.

@@ -70,6 +70,8 @@ struct StepCounts {
   /// Strict self truth and found self contacts inside it, both only on triangles CollideVF_SS
   /// accepts (|cross|² > SIMD_EPSILON).
   std::size_t self_truth_strict = 0, self_found_in_strict = 0;
+  /// The same over all pairs, the triangles CollideVF_SS refuses included (what Robust can find).
+  std::size_t self_truth_strict_all = 0, self_found_in_strict_all = 0;
   std::size_t self_outside_truth = 0;                    ///< found self contacts outside the full self truth
   // After the step.
   std::size_t penetrating_vertices = 0;                  ///< inside another closed body beyond the margins

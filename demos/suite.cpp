@@ -54,8 +54,11 @@ std::string summary(const RunResult& r) {
   s += ", self-crossings max " + std::to_string(r.self_intersections_max) + " (" +
        std::to_string(r.self_intersections_steps) + " steps)";
   if (r.has_self_truth) {
-    s += ", self strict " + fmt("%.4f", r.self_recall_strict) + " of " + std::to_string(r.self_truth_strict_total) +
-         ", " + std::to_string(r.self_contacts_found_total) + " self contacts";
+    s += ", self strict " + fmt("%.4f", r.self_recall_strict) + " of " + std::to_string(r.self_truth_strict_total);
+    if (r.self_truth_strict_all_total > r.self_truth_strict_total)
+      s += " (" + fmt("%.4f", r.self_recall_strict_all) + " of all " + std::to_string(r.self_truth_strict_all_total) +
+           ", triangles CollideVF_SS refuses included)";
+    s += ", " + std::to_string(r.self_contacts_found_total) + " self contacts";
     if (r.has_full) s += " (" + std::to_string(r.self_contacts_outside_truth) + " outside)";
   }
   if (r.bullet_clusters > 0)
@@ -194,7 +197,8 @@ int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ost
   out << "recall: found ∩ truth / truth over all steps, then the worst step; pairs: body pairs in contact that got a "
          "contact;\ncoll ms, step ms: soft-soft collision time and whole step per step (means after warm-up); B/ours: "
          "Bullet's coll ms over this run's; bounds: the sensors pipeline with its sensor stage off (boxes only);\nmax "
-         "pen: deepest vertex inside another closed body beyond the margins\n";
+         "pen: deepest vertex inside another closed body beyond the margins; cross, self-x: most edge-triangle crossings "
+         "in a step between bodies, within one body;\nself rec: strict self recall (--self-collision)\n";
   if (options.run.flagging == FlaggingMode::Thesis &&
       std::find(options.pipelines.begin(), options.pipelines.end(), Pipeline::Sensors) != options.pipelines.end())
     out << "sensors runs: --flagging thesis (Flagging::Sensors, the thesis's flag-only mode)\n";

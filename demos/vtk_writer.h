@@ -2,7 +2,8 @@
 // collection per series, so File > Open on the .pvd gives an animation.
 //   <dir>/<run>_surface.pvd    all soft bodies of a step in one .vtp; point data "body",
 //                              "region" (-1 for Bullet), "flagged" (vertex in a flagged region;
-//                              Bullet: vertex in a contact), "contact", "missed" (in a strict-truth
+//                              Bullet: vertex in a contact), "contact", "self_contact" (in a
+//                              contact of its body with itself), "missed" (in a strict-truth
 //                              contact the pipeline did not find); cell data "body", "flagged"
 //   <dir>/<run>_particles.pvd  the sensor particles as points; "body", "region", "flagged"
 //   <dir>/<run>_static.vtp     the static boxes (ground, walls)
