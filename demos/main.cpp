@@ -46,11 +46,11 @@ std::vector<std::size_t> parseValues(const std::vector<std::string>& tokens, con
 }
 
 void listScenes() {
-  std::printf("%-4s %-12s %-7s %-6s %s\n", "#", "name", "bodies", "steps", "what");
+  std::printf("%-4s %-12s %-7s %-6s %-6s %s\n", "#", "name", "bodies", "steps", "res", "what");
   for (const SceneInfo& s : sceneCatalog())
-    std::printf("%-4s %-12s %-7s %-6zu %s\n", s.number.c_str(), s.name.c_str(),
+    std::printf("%-4s %-12s %-7s %-6zu %-6zu %s\n", s.number.c_str(), s.name.c_str(),
                 (s.takes_body_count ? std::to_string(s.default_bodies) + "*" : std::to_string(s.default_bodies)).c_str(),
-                s.default_steps, s.summary.c_str());
+                s.default_steps, s.default_resolution, s.summary.c_str());
   std::printf("(* = --bodies applies)\n");
 }
 
@@ -72,7 +72,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> sweep, bullet_clusters;
   bool list = false, no_penetration = false, self_collision = false, refit_in_step = false, runaway_fallback = false;
   app.add_option("--scene", scenes, "scene name or number, repeatable, or 'all' (default: all; see --list-scenes)");
-  app.add_option("--resolution", params.resolution, "vertices per body (default 1000)")->check(CLI::Range(14, 10000000));
+  app.add_option("--resolution", params.resolution, "vertices per body (default: the scene's, 1000; cloth_fold 2000)")->check(CLI::Range(14, 10000000));
   app.add_option("--bodies", params.bodies, "body count, for scenes that take one (default: the scene's)")
       ->check(CLI::Range(1, 100000));
   app.add_option("--steps", steps, "simulation steps (default: the scene's)")->check(CLI::Range(1, 10000000));

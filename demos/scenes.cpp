@@ -472,7 +472,7 @@ const std::vector<SceneInfo>& sceneCatalog() {
       {"projectile", "9", "a small soft sphere at 30 units/s into a large soft block (tunnelling)", false, 2, 60},
       {"fast_cloth", "10", "a soft ball at 20 units/s into a pinned cloth (tunnelling)", false, 2, 60},
       {"cloth_fold", "11", "a cloth dropped across a thin bar, falling folded onto itself (self-collision)", false, 1,
-       180},
+       180, 2000},
       {"tube_coil", "12", "a long soft tube in a loose helix coiling onto itself on the ground (self-collision)", false,
        1, 180},
   };
@@ -486,13 +486,15 @@ const SceneInfo* findScene(const std::string& key) {
   return nullptr;
 }
 
-Scene makeScene(const std::string& key, const SceneParams& p) {
+Scene makeScene(const std::string& key, const SceneParams& asked) {
   const SceneInfo* info = findScene(key);
   if (!info) {
     std::string names;
     for (const SceneInfo& s : sceneCatalog()) names += (names.empty() ? "" : ", ") + s.name;
     throw badParam("unknown scene '" + key + "' (known: " + names + ")");
   }
+  SceneParams p = asked;
+  if (p.resolution == 0) p.resolution = info->default_resolution;
   if (p.resolution < 14) throw badParam("resolution " + std::to_string(p.resolution) + " is below 14 vertices per body");
   Scene s;
   const std::string& n = info->name;

@@ -15,7 +15,7 @@ namespace psc::demo {
 
 /// What the user asks of a scene. Scenes ignore what does not apply to them.
 struct SceneParams {
-  std::size_t resolution = 1000;  ///< vertices per body; generators pick the nearest tessellation
+  std::size_t resolution = 0;     ///< vertices per body (generators pick the nearest tessellation); 0 = the scene's default
   std::size_t bodies = 0;         ///< body count for scenes that take one; 0 = the scene's default
   std::uint64_t seed = 1;         ///< placement jitter and orientations
   std::string mesh_file;          ///< scene 8: OBJ/OFF/PLY/STL; empty = the built-in default
@@ -72,6 +72,7 @@ struct SceneInfo {
   bool takes_body_count = false;
   std::size_t default_bodies = 2;
   std::size_t default_steps = 120;
+  std::size_t default_resolution = 1000;  ///< vertices per body when SceneParams::resolution is 0
 };
 
 /// All scenes, in docs/BENCHMARK.md's order.
