@@ -150,7 +150,8 @@ int runSuite(const std::vector<Job>& jobs, const SuiteOptions& options, std::ost
       double remaining = 0;
       for (std::size_t k = i; k < jobs.size(); ++k) {
         // Later jobs are estimated from their parameters alone (building their meshes would cost).
-        const std::size_t res = jobs[k].params.resolution;
+        const std::size_t res = jobs[k].params.resolution ? jobs[k].params.resolution
+                                                          : findScene(jobs[k].scene)->default_resolution;
         const std::size_t bodies = jobs[k].params.bodies ? jobs[k].params.bodies : (findScene(jobs[k].scene)->default_bodies);
         const std::size_t st = jobs[k].steps ? jobs[k].steps : findScene(jobs[k].scene)->default_steps;
         remaining += double(res * bodies * st * variants.size());
