@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <unordered_map>
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -2014,14 +2015,16 @@ class Collector {
     // Each chunk is gathered once as a vertex side for one direction and as a triangle side for
     // the other: two passes keep the two directions' records apart.
     const double margin_sum = A.margin + B.margin;
+    BallBoxes& balls_a = ballsOf(A);
+    BallBoxes& balls_b = ballsOf(B);
     for (const auto& [ka, kb] : chunk_pairs_)
-      if (verticesReach(A, s_.near_a[ka].chunk, B, s_.near_b[kb].chunk, margin_sum))
+      if (verticesReach(A, balls_a, s_.near_a[ka].chunk, B, s_.near_b[kb].chunk, margin_sum))
         chunkCandidates(to_b, s_.near_a[ka], s_.near_b[kb]);
     for (ChunkRef& c : s_.near_a) c.vertices_at = c.triangles_at = -1;
     for (ChunkRef& c : s_.near_b) c.vertices_at = c.triangles_at = -1;
     s_.clearRecords();
     for (const auto& [ka, kb] : chunk_pairs_)
-      if (verticesReach(B, s_.near_b[kb].chunk, A, s_.near_a[ka].chunk, margin_sum))
+      if (verticesReach(B, balls_b, s_.near_b[kb].chunk, A, s_.near_a[ka].chunk, margin_sum))
         chunkCandidates(to_a, s_.near_b[kb], s_.near_a[ka]);
     counters_.ms_candidates += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   }
@@ -2029,11 +2032,20 @@ class Collector {
   /// Per body met this step, per chunk: the box of its own vertices' motion balls (x ± motion_factor
   /// × |Δx|), made on first use (most chunks are never near another body).
   struct BallBoxes {
-    BodyId id;
     std::vector<char> made;
     std::vector<Vec3> lo, hi;
   };
-  std::vector<BallBoxes> balls_;
+  std::unordered_map<BodyId, BallBoxes> balls_;  ///< by body id (references stay valid)
+
+  BallBoxes& ballsOf(const Body& V) {
+    BallBoxes& b = balls_[V.id];
+    if (b.made.empty()) {
+      b.made.assign(V.chunk_box.size(), 0);
+      b.lo.resize(V.chunk_box.size());
+      b.hi.resize(V.chunk_box.size());
+    }
+    return b;
+  }
 
   /// Whether any own vertex of V's chunk cv can pick a triangle of T's chunk ct: chunkCandidates
   /// picks a vertex whose ball (x, margin_sum + motion_factor·|Δx|) meets ct's box, and every such
@@ -2041,17 +2053,10 @@ class Collector {
   /// meet, one direction or both have no such vertex (a chunk's box also holds the corners its
   /// triangles borrow from its neighbours), and that direction's vertices need not be gathered.
   /// The swept bound gathers other balls (about the paths' midpoints): always true there.
-  bool verticesReach(const Body& V, Index cv, const Body& T, Index ct, double margin_sum) {
+  /// `balls`: V's table (ballsOf).
+  bool verticesReach(const Body& V, BallBoxes& balls, Index cv, const Body& T, Index ct, double margin_sum) {
     if (params_.swept) return true;
-    BallBoxes* bb = nullptr;
-    for (BallBoxes& b : balls_)
-      if (b.id == V.id) bb = &b;
-    if (bb == nullptr) {
-      balls_.push_back({V.id, std::vector<char>(V.chunk_box.size(), 0), std::vector<Vec3>(V.chunk_box.size()),
-                        std::vector<Vec3>(V.chunk_box.size())});
-      bb = &balls_.back();
-    }
-    if (!bb->made[cv]) {
+    if (!balls.made[cv]) {
       Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
       const bool moved = !V.previous.empty();
       for (const Index v : V.chunks.vertices(cv)) {
@@ -2060,12 +2065,12 @@ class Collector {
         lo = lo.cwiseMin(Vec3(x.array() - m));
         hi = hi.cwiseMax(Vec3(x.array() + m));
       }
-      bb->lo[cv] = lo;
-      bb->hi[cv] = hi;
-      bb->made[cv] = 1;
+      balls.lo[cv] = lo;
+      balls.hi[cv] = hi;
+      balls.made[cv] = 1;
     }
-    const Vec3& lo = bb->lo[cv];
-    const Vec3& hi = bb->hi[cv];
+    const Vec3& lo = balls.lo[cv];
+    const Vec3& hi = balls.hi[cv];
     if (!(lo.array() <= hi.array()).all()) return false;  // no own vertex
     const double g = margin_sum * (1.0 + 1e-9) + 1e-9 * std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff());
     const MotionBox& t = T.chunk_box[ct];
