@@ -913,6 +913,8 @@ struct PairContext {
   /// With out_d2: each candidate's owned-triangle index in tb's chunks, parallel to `out`
   /// (NearestSeeds).
   std::vector<Index>* out_k = nullptr;
+  /// vb == tb with the rest-shape bound on: this step's y-boxes, for dropUnbentPicks.
+  const RestFit* rest_fit = nullptr;
 };
 
 /// SensorSettings::nearest_candidates keeps a vertex's candidates within this factor of its least
@@ -1476,6 +1478,37 @@ void narrowToPicks(const VertexLanes& lanes, std::size_t at, const Index* picked
   }
 }
 
+bool restClears(double exclusion, double deviation, double reach);
+
+/// [beyond] The rest-shape bound for each picked vertex of a self pair, against the triangle chunk
+/// ct of its own body. With R the rotation of ct's region and y = x − R·rest, every corner c of
+/// ct's triangles has y_c in ct's y-box (RestFit::chunk_lo, chunk_hi), and for the point p of a
+/// triangle t nearest to the vertex v now, y_p is an average of t's corners' y, so
+///   |x_v − x_p| ≥ |rest_v − rest_p| − |y_v − y_p| ≥ dist_rest(v, t) − max_c |y_v − y_c|.
+/// A pair the exclusion rule leaves in was at least E = self_rest_exclusion × R apart at rest: a
+/// vertex whose y lies within E − reach of every corner of ct's y-box has no candidate in ct, and
+/// leaves the picks. This is restApartChunks with the vertex's own y for the translation: the
+/// vertex chunk's y-spread drops out, which clears vertices next to a bent chunk that the chunk
+/// pair's bound cannot. Keeps the order of the remaining picks; returns how many.
+std::size_t dropUnbentPicks(const PairContext& ctx, Index ct, const VertexRec* recs, Index* picked,
+                            std::size_t n_picked) {
+  const RestFit& f = *ctx.rest_fit;
+  const Eigen::Matrix3d& rot = f.rot[ctx.tb.chunks.region_of[ct]];
+  const Vec3& lo = f.chunk_lo[ct];
+  const Vec3& hi = f.chunk_hi[ct];
+  const double exclusion = std::sqrt(ctx.self_exclude2);
+  std::size_t n = 0;
+  for (std::size_t k = 0; k < n_picked; ++k) {
+    const VertexRec& vr = recs[picked[k]];
+    const Vec3 y = vr.x - rot * ctx.tb.rest[vr.v];
+    const double deviation = (lo - y).cwiseAbs().cwiseMax((hi - y).cwiseAbs()).norm();
+    picked[n] = picked[k];
+    n += static_cast<std::size_t>(!restClears(exclusion, deviation, std::sqrt(vr.reach2)));
+  }
+  ctx.counters.self_vertices_unbent += n_picked - n;
+  return n;
+}
+
 // Vertices of chunk cv (of ctx.vb) against the triangles owned by chunk ct (of ctx.tb).
 void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
   const std::size_t nt = ctx.tb.chunks.triangleCount(ct.chunk);
@@ -1510,6 +1543,10 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     n_picked = pickScalar(s.vert_lanes, at_v, 0, nv, 0, tbox, slab_lo, slab_hi, s.picked.data(), dropped);
   ctx.counters.vertices_dropped += dropped;
   if (n_picked == 0) return;
+  if (ctx.rest_fit != nullptr) {
+    n_picked = dropUnbentPicks(ctx, ct.chunk, recs, s.picked.data(), n_picked);
+    if (n_picked == 0) return;
+  }
   [[maybe_unused]] std::size_t padded = 0;  // the kept triangles, padded for collectMeetsAvx2
   // Only the triangles that reach the vertex chunk's grown box can meet any of its vertices.
   gatherTriangles(ctx, ct);
@@ -1798,12 +1835,13 @@ class Collector {
     const Axis no_axis;
     if (params_.nearest && least_.size() < X.chunks.chunk_of.size())
       least_.resize(X.chunks.chunk_of.size(), std::numeric_limits<double>::infinity());
-    const PairContext ctx{X,         X,  radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude,
-                          self_motion ? &fit.mean_motion : nullptr, 0.0, params_.nearest ? &g.d2 : nullptr,
-                          params_.nearest ? least_.data() : nullptr};
-    const auto t0 = std::chrono::steady_clock::now();
     // The rest-shape bound needs the radius bound's reach (a swept pair may meet during the step).
     const bool rest_bound = params_.self_rest_bound && self_motion;
+    PairContext ctx{X,         X,  radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude,
+                    self_motion ? &fit.mean_motion : nullptr, 0.0, params_.nearest ? &g.d2 : nullptr,
+                    params_.nearest ? least_.data() : nullptr};
+    if (rest_bound) ctx.rest_fit = &fit;
+    const auto t0 = std::chrono::steady_clock::now();
     // The largest reach of the vertices in box b (reachOf of the largest radius and coordinate).
     const auto reachIn = [&](const MotionBox& b) {
       return (radius + mf * b.motion) * (1.0 + 1e-5) + 1e-6 * std::max(b.lo.cwiseAbs().maxCoeff(), b.hi.cwiseAbs().maxCoeff());

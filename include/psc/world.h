@@ -102,6 +102,7 @@ struct StepStats {
   std::size_t self_excluded_pairs = 0;     ///< self pairs the boxes kept but the exclusion rule drops (incident, or close at rest), past the rest-centroid pre-test (a triangle whose rest centroid is within the exclusion distance is dropped with the box test, uncounted)
   std::size_t self_region_pairs_unbent = 0; ///< of self_region_pairs: ruled out whole by the rest-shape bound
   std::size_t self_chunk_pairs_unbent = 0;  ///< (vertex chunk, triangle chunk) pairs of one body the rest-shape bound ruled out
+  std::size_t self_vertices_unbent = 0;     ///< vertices of self chunk pairs past the box test that the rest-shape bound ruled out against the triangle chunk
   std::size_t repartitions = 0;            ///< bodies re-partitioned this step
   double r_eff = 0.0;                      ///< R_eff used this step (length units)
   double ms_sensors = 0.0;                 ///< particle movement (wall clock)

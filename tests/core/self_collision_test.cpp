@@ -268,7 +268,7 @@ TEST(SelfCollision, TheRestShapeBoundDropsOnlyPairsThatCannotTouch) {
   const TriMesh ball = makeSphere(1.0, 1500);
   const Eigen::Matrix3d turn = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
   const Vec3 shift(0.3, -2.0, 0.5), step(0.01, -0.02, 0.005);
-  std::size_t unbent_seen = 0, pairs_seen = 0;
+  std::size_t unbent_seen = 0, pairs_seen = 0, vertices_unbent_seen = 0;
   for (double squash : {1.0, 0.8, 0.5, 0.2, 0.1}) {
     std::vector<Vec3> now = ball.vertices, before = ball.vertices;
     for (std::size_t v = 0; v < now.size(); ++v) {
@@ -298,16 +298,19 @@ TEST(SelfCollision, TheRestShapeBoundDropsOnlyPairsThatCannotTouch) {
       stats[bound] = res.stats;
     }
     EXPECT_EQ(got[1], got[0]) << "squash " << squash;
-    EXPECT_EQ(stats[0].self_chunk_pairs_unbent + stats[0].self_region_pairs_unbent, 0u) << "off means off";
+    EXPECT_EQ(stats[0].self_chunk_pairs_unbent + stats[0].self_region_pairs_unbent + stats[0].self_vertices_unbent, 0u)
+        << "off means off";
     if (squash == 1.0) {
       EXPECT_TRUE(got[1].empty()) << "a rigidly moved ball cannot touch itself";
       EXPECT_GT(stats[1].self_region_pairs_unbent + stats[1].self_chunk_pairs_unbent, 0u);
     }
     unbent_seen += stats[1].self_chunk_pairs_unbent + stats[1].self_region_pairs_unbent;
+    vertices_unbent_seen += stats[1].self_vertices_unbent;
     pairs_seen += got[1].size();
   }
   EXPECT_GT(pairs_seen, 1000u) << "the flattest balls touch themselves";
   EXPECT_GT(unbent_seen, 0u);
+  EXPECT_GT(vertices_unbent_seen, 0u) << "the per-vertex bound (dropUnbentPicks) took part";
 }
 
 TEST(SelfCollision, TheRestShapeBoundFollowsASpinningBody) {
