@@ -130,6 +130,11 @@ int main(int argc, char** argv) {
   app.add_flag("--refit-in-step", refit_in_step,
                "our pipelines refit every body in the sensor step (cold) instead of right after its "
                "predictMotion (psc::bullet::SoftBodySolver, the default here)");
+  bool no_runaway_sharing = false;
+  app.add_flag("--no-runaway-sharing", no_runaway_sharing,
+               "our pipelines: Bullet's contact weights always, even in a pair that runs away (without it, such a "
+               "pair's contacts beyond the margins share one contact's weight per node: "
+               "psc::bullet::Settings::runaway_sharing)");
   app.add_flag("--runaway-fallback", runaway_fallback,
                "our pipelines with --exact bullet or robust and the radius bound: a body pair that runs away goes "
                "on the ahead bound until its bodies part (psc::bullet::Settings::runaway_fallback)");
@@ -191,6 +196,7 @@ int main(int argc, char** argv) {
     options.run.self_collision = self_collision;
     options.run.refit_after_predict = !refit_in_step;
     options.run.runaway_fallback = runaway_fallback;
+    options.run.runaway_sharing = !no_runaway_sharing;
     options.run.contacts = contacts;
     options.run.frames_dir = frames;
     options.run.frame_every = frame_every;

@@ -114,6 +114,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["exact"] = r.exact;
   if (!r.motion_bound.empty()) j["motion_bound"] = r.motion_bound;
   if (r.pipeline != Pipeline::Bullet) j["runaway_fallback"] = r.runaway_fallback;
+  if (r.pipeline != Pipeline::Bullet) j["runaway_sharing"] = r.runaway_sharing;
   if (!r.contacts.empty()) j["contact_set"] = r.contacts;
   if (r.has_strict) {
     j["recall_strict"] = r.recall_strict;
@@ -179,6 +180,8 @@ nlohmann::ordered_json toJson(const RunResult& r) {
     j["round_cap_hits"] = r.round_cap_hits;
     j["repartitions"] = r.repartitions;
     j["fallback_pairs"] = r.fallback_pairs;
+    j["sharing_steps"] = r.sharing_steps;
+    j["shared_contacts"] = r.shared_contacts;
     if (!r.pipeline_error.empty()) j["pipeline_error"] = r.pipeline_error;
   }
   if (!r.flagging.empty()) j["flagging"] = r.flagging;

@@ -231,6 +231,7 @@ RunResult describeRun(const Scene& scene, Pipeline pipeline, const RunOptions& o
   r.exact = pipeline == Pipeline::Bullet ? "bullet" : opt.exact;
   r.motion_bound = pipeline == Pipeline::Bullet ? "" : opt.exact == "continuous" ? "swept" : opt.motion_bound;
   r.runaway_fallback = pipeline != Pipeline::Bullet && opt.runaway_fallback;
+  r.runaway_sharing = pipeline != Pipeline::Bullet && opt.runaway_sharing;
   if (pipeline != Pipeline::Bullet) r.contacts = opt.contacts;
   if (pipeline == Pipeline::Bullet && opt.bullet_clusters > 0) {
     r.bullet_clusters = opt.bullet_clusters;
@@ -360,6 +361,7 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
     o.self_collision = opt.self_collision;
     o.refit_after_predict = opt.refit_after_predict;
     o.runaway_fallback = opt.runaway_fallback;
+    o.runaway_sharing = opt.runaway_sharing;
     sensors_ = std::make_unique<SensorPipeline>(world_, o);
   }
   truth_settings_.strict = strict;
@@ -637,6 +639,8 @@ void summariseCounts(RunResult& r) {
     r.round_cap_hits += n.round_cap_hits;
     r.repartitions += n.repartitions;
     r.fallback_pairs += n.fallback_pairs;
+    r.sharing_steps += n.sharing_pairs > 0 ? 1 : 0;
+    r.shared_contacts += n.shared_contacts;
     if (r.pipeline_error.empty() && !rec.error.empty()) r.pipeline_error = rec.error;
     r.truth_strict_total += n.truth_strict;
     r.truth_full_total += n.truth_full;

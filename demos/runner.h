@@ -81,6 +81,8 @@ struct RunOptions {
   bool refit_after_predict = true;
   /// psc::bullet::Settings::runaway_fallback for our pipelines (--runaway-fallback).
   bool runaway_fallback = false;
+  /// psc::bullet::Settings::runaway_sharing for our pipelines (--no-runaway-sharing: false).
+  bool runaway_sharing = true;
   /// psc::bullet::Settings::contacts for our pipelines: "all" or "nearest" (--contacts).
   std::string contacts = "all";
   /// > 0: a Bullet cluster run (only with Pipeline::Bullet): generateClusters(bullet_clusters) on
@@ -101,6 +103,7 @@ struct RunResult {
   std::string exact = "bullet";   ///< exact test of the run (Bullet's own pipeline: always bullet)
   std::string motion_bound;       ///< ours: "ahead", "radius" or "swept" (continuous); empty for Bullet's
   bool runaway_fallback = false;  ///< ours: RunOptions::runaway_fallback
+  bool runaway_sharing = false;   ///< ours: RunOptions::runaway_sharing
   std::string contacts;           ///< ours: RunOptions::contacts; empty for Bullet's
   bool self_collision = false;    ///< the pipeline itself: ours with RunOptions::self_collision, Bullet's cluster runs
   int bullet_clusters = 0;        ///< RunOptions::bullet_clusters (0: not a cluster run)
@@ -132,6 +135,9 @@ struct RunResult {
   std::size_t round_cap_hits = 0;
   std::size_t repartitions = 0;
   std::size_t fallback_pairs = 0;
+  /// Ours: steps in which some body pair's contacts beyond the margins shared their weight
+  /// (psc::bullet::Stats::sharing_pairs > 0), and the contacts so changed, summed over the steps.
+  std::size_t sharing_steps = 0, shared_contacts = 0;
   std::string pipeline_error;              ///< first error the plugin reported, if any
   // Timing, over the timed steps (per_step[warmup...]).
   std::size_t warmup = 0;                  ///< steps left out of the timing

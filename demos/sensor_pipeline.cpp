@@ -29,6 +29,7 @@ SensorPipeline::SensorPipeline(SceneWorld& world, const Options& options) {
   settings.sensors.flagging = options.flagging;
   settings.self_collision = options.self_collision;
   settings.runaway_fallback = options.runaway_fallback;
+  settings.runaway_sharing = options.runaway_sharing;
   settings.exact = psc::bullet::exactTestFromString(options.exact);
   if (options.motion_bound == "radius") settings.sensors.motion_bound = psc::MotionBound::Radius;
   else if (options.motion_bound == "ahead") settings.sensors.motion_bound = psc::MotionBound::Ahead;
@@ -62,6 +63,8 @@ void SensorPipeline::takeStep(StepRecord& record) {
   n.candidate_pairs = s.candidate_pairs;
   n.exact_tests = s.exact_tests;
   n.reduced_contacts = s.reduced_contacts;
+  n.sharing_pairs = s.sharing_pairs;
+  n.shared_contacts = s.shared_contacts;
   // The plugin's runaway rule counts what its exact test accepted, before a contact reduction:
   // with --contacts nearest the contacts found stay under the rule while a runaway goes on.
   if (s.runaway_pairs > n.runaway_pairs) {

@@ -52,6 +52,7 @@ class SensorPipeline {
     /// false: every body is refit in the sensor step, at the first soft-soft pair.
     bool refit_after_predict = true;
     bool runaway_fallback = false;  ///< Settings::runaway_fallback
+    bool runaway_sharing = true;    ///< Settings::runaway_sharing
   };
   /// Installs the plugin on `world`'s soft bodies. A text option that names no choice throws
   /// psc::Error(InvalidArgument).

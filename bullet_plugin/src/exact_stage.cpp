@@ -542,4 +542,40 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
   return counts;
 }
 
+std::size_t shareBandWeights(btSoftBody& node_body, int from, btScalar radius) {
+  btAlignedObjectArray<btSoftBody::SContact>& list = node_body.m_scontacts;
+  if (from >= list.size()) return 0;
+  // Per node (by index), how many of its contacts in the range lie in the band; a node's
+  // contacts are not consecutive (the core's candidates come by region and chunk pair).
+  thread_local std::vector<int> band;
+  thread_local std::vector<char> in_band;
+  if (band.size() < static_cast<std::size_t>(node_body.m_nodes.size()))
+    band.resize(static_cast<std::size_t>(node_body.m_nodes.size()), 0);
+  in_band.assign(static_cast<std::size_t>(list.size() - from), 0);
+  const btSoftBody::Node* nodes = &node_body.m_nodes[0];
+  const btScalar radius2 = radius * radius;
+  for (int i = from; i < list.size(); ++i) {
+    const btSoftBody::SContact& c = list[i];
+    const btSoftBody::Face& f = *c.m_face;
+    const btVector3 p = f.m_n[0]->m_x * c.m_weights.x() + f.m_n[1]->m_x * c.m_weights.y() +
+                        f.m_n[2]->m_x * c.m_weights.z();
+    if ((c.m_node->m_x - p).length2() >= radius2) {
+      in_band[static_cast<std::size_t>(i - from)] = 1;
+      ++band[static_cast<std::size_t>(c.m_node - nodes)];
+    }
+  }
+  std::size_t changed = 0;
+  for (int i = from; i < list.size(); ++i) {
+    if (!in_band[static_cast<std::size_t>(i - from)]) continue;
+    btSoftBody::SContact& c = list[i];
+    const int k = band[static_cast<std::size_t>(c.m_node - nodes)];
+    if (k < 2) continue;
+    c.m_cfm[0] /= btScalar(k);
+    c.m_cfm[1] /= btScalar(k);
+    ++changed;
+  }
+  for (int i = from; i < list.size(); ++i) band[static_cast<std::size_t>(list[i].m_node - nodes)] = 0;
+  return changed;
+}
+
 }  // namespace psc::bullet

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cassert>
 #include <chrono>
+#include <iterator>
 #include <string>
 #include <tuple>
 #include <utility>
@@ -177,6 +178,7 @@ void Installation::collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, p
   if (!collided_pairs_.insert(key).second) return;
   const auto start = std::chrono::steady_clock::now();
   const std::vector<psc::CandidatePair>& candidates = sensors_.lastResult().candidates;
+  const int before_a = a.m_scontacts.size(), before_b = b.m_scontacts.size();
   const auto ab = candidatesOf(candidates, id_a, id_b);
   const ExactCounts ab_counts = collideCandidates(settings_.exact, a, b, ab.first, ab.second, settings_.contacts);
   const auto ba = candidatesOf(candidates, id_b, id_a);
@@ -186,6 +188,17 @@ void Installation::collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, p
   // The rule counts what the exact test accepted, before ContactSet::NearestFace kept the nearest.
   const std::size_t contacts = ab_counts.contacts + ab_counts.reduced + ba_counts.contacts + ba_counts.reduced;
   const bool runaway = isRunaway(a, b, contacts);
+  if (settings_.runaway_sharing && settings_.exact != ExactTest::Continuous) {
+    // From the step the pair runs away (that step's contacts included) until it has none.
+    if (runaway) sharing_pairs_.insert(key);
+    if (contacts == 0) {
+      sharing_pairs_.erase(key);
+    } else if (sharing_pairs_.count(key) != 0) {
+      const btScalar radius = a.getCollisionShape()->getMargin() + b.getCollisionShape()->getMargin();
+      stats_.shared_contacts += shareBandWeights(a, before_a, radius) + shareBandWeights(b, before_b, radius);
+      ++stats_.sharing_pairs;
+    }
+  }
   if (runaway && settings_.runaway_fallback && settings_.exact != ExactTest::Continuous &&
       settings_.sensors.motion_bound == psc::MotionBound::Radius && !sensors_.pairAhead(id_a, id_b)) {
     sensors_.setPairAhead(id_a, id_b, true);
@@ -324,6 +337,9 @@ void Installation::senseOncePerStep() {
   // none): predictMotion has run for every soft body by then (m_x predicted, m_q previous).
   if (sensedThisStep()) return;
   world_.getDispatchInfo().m_stepCount = kSensed;
+  // A sharing pair that was not collided last step has parted (no candidates, no dispatch).
+  for (auto it = sharing_pairs_.begin(); it != sharing_pairs_.end();)
+    it = collided_pairs_.count(*it) != 0 ? std::next(it) : sharing_pairs_.erase(it);
   collided_pairs_.clear();
   const std::uint64_t sensor_steps = stats_.sensor_steps + 1;
   stats_ = Stats{};

@@ -107,6 +107,8 @@ class Installation {
   mutable std::mutex mutex_;  ///< Bullet may dispatch pairs from several threads (btCollisionDispatcherMt)
   bool step_ok_ = false;
   std::unordered_set<std::uint64_t> collided_pairs_;  ///< body-id pairs collided in this step
+  /// Settings::runaway_sharing: body-id pairs that ran away and have not had a step without contact.
+  std::unordered_set<std::uint64_t> sharing_pairs_;
   Stats stats_;
   SoftBodySolver* solver_ = nullptr;  ///< attached (Plugin::attach)
   double ahead_ms_ = 0.0;            ///< afterPredictMotion's time since the last sensor step

@@ -232,22 +232,27 @@ TEST(Scenes, DeterministicAndHonourTheirParameters) {
   }
 }
 
-TEST(Scenes, FastImpactRunsAwayWithTheRadiusBoundButNotAheadNorWithTheFallback) {
-  // fast_impact's penetration with Bullet's exact test (0.41 deep at 1,000 vertices) has one cause:
-  // a complete midphase hands CollideVF_SS every pair inside margins + 2|dx|, Bullet's response
-  // pushes each approaching node out to that whole radius, the node comes back faster with a
-  // larger radius, and the contacts feed on themselves (docs/BENCHMARK.md, "Runaways"). At 600
-  // vertices the same runaway shows within 60 steps. MotionBound::Ahead hands over only the pairs
-  // within the margins or headed into contact: no runaway, fewer tests than Bullet's own path, no
-  // penetration, and still every strict contact Bullet can test. With the runaway fallback
-  // (psc::bullet::Settings::runaway_fallback) the radius bound runs away once, then the pair goes on
-  // the ahead bound: one runaway step, fewer tests than Bullet's own path, no deeper than it.
+TEST(Scenes, FastImpactRunsAwayWithBulletsWeightsButNotWhenTheBandSharesNorAheadNorWithTheFallback) {
+  // fast_impact's penetration with Bullet's exact test (0.41 deep at 1,000 vertices with Bullet's
+  // weights) has one cause: a complete midphase hands CollideVF_SS every pair inside
+  // margins + 2|dx|, Bullet's response pushes each approaching node out to that whole radius, the
+  // node comes back faster with a larger radius, and the contacts feed on themselves
+  // (docs/BENCHMARK.md, "Runaways"). At 600 vertices the same runaway shows within 60 steps when
+  // every contact keeps Bullet's weight (Settings::runaway_sharing off). With the default, once the
+  // pair goes over the runaway rule its contacts beyond the margins share one contact's weight per
+  // node: the runaway ends within a few steps, every contact is still made (full recall above
+  // Bullet's own path's), fewer tests than Bullet's own path, no penetration. MotionBound::Ahead
+  // hands over only the pairs within the margins or headed into contact: no runaway at all. With
+  // the runaway fallback (Settings::runaway_fallback, here with Bullet's weights) the radius bound
+  // runs away once, then the pair goes on the ahead bound.
   if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
   SceneParams p;
   p.resolution = 600;
   const Scene scene = makeScene("fast_impact", p);
   RunOptions o;
-  o.truth = TruthMode::Strict;
+  o.truth = TruthMode::Both;
+  const RunResult shared = runPipeline(scene, Pipeline::Sensors, o);
+  o.runaway_sharing = false;
   const RunResult radius = runPipeline(scene, Pipeline::Sensors, o);
   o.runaway_fallback = true;
   const RunResult fallback = runPipeline(scene, Pipeline::Sensors, o);
@@ -255,14 +260,25 @@ TEST(Scenes, FastImpactRunsAwayWithTheRadiusBoundButNotAheadNorWithTheFallback) 
   o.motion_bound = "ahead";
   const RunResult ahead = runPipeline(scene, Pipeline::Sensors, o);
   const RunResult bullet = runPipeline(scene, Pipeline::Bullet, o);
-  for (const RunResult* r : {&radius, &fallback, &ahead, &bullet})
-    std::printf("fast_impact 600v %s (%s%s): runaway steps %zu, exact/step %.1f, max pen %.3f, strict testable %.4f\n",
-                toString(r->pipeline), r->motion_bound.c_str(), r->runaway_fallback ? ", fallback" : "", r->runaway_steps,
-                r->exact_tests_per_step, r->max_penetration, r->recall_strict_testable);
+  for (const RunResult* r : {&shared, &radius, &fallback, &ahead, &bullet})
+    std::printf("fast_impact 600v %s (%s%s%s): runaway steps %zu, exact/step %.1f, max pen %.3f, strict testable "
+                "%.4f, full %.4f, sharing steps %zu\n",
+                toString(r->pipeline), r->motion_bound.c_str(), r->runaway_sharing ? ", sharing" : "",
+                r->runaway_fallback ? ", fallback" : "", r->runaway_steps, r->exact_tests_per_step, r->max_penetration,
+                r->recall_strict_testable, r->recall_full, r->sharing_steps);
   EXPECT_EQ(radius.motion_bound, "radius");
   EXPECT_EQ(ahead.motion_bound, "ahead");
-  EXPECT_GT(radius.runaway_steps, 0u) << "the scene no longer shows the runaway it is kept for";
+  EXPECT_GE(radius.runaway_steps, 10u) << "the scene no longer shows the runaway it is kept for";
   EXPECT_GT(radius.exact_tests_per_step, bullet.exact_tests_per_step);
+  EXPECT_EQ(radius.sharing_steps, 0u) << "off means off";
+  EXPECT_TRUE(shared.runaway_sharing);
+  EXPECT_GT(shared.sharing_steps, 0u);
+  EXPECT_GT(shared.runaway_steps, 0u) << "sharing starts with the first runaway step";
+  EXPECT_LE(shared.runaway_steps, 3u);
+  EXPECT_LT(shared.exact_tests_per_step, bullet.exact_tests_per_step);
+  EXPECT_LE(shared.max_penetration, bullet.max_penetration);
+  EXPECT_EQ(shared.recall_strict_testable, 1.0);
+  EXPECT_GE(shared.recall_full, bullet.recall_full) << "every contact is still made";
   EXPECT_EQ(ahead.runaway_steps, 0u);
   EXPECT_LT(ahead.exact_tests_per_step, bullet.exact_tests_per_step);
   EXPECT_LE(ahead.max_penetration, bullet.max_penetration);
@@ -273,6 +289,27 @@ TEST(Scenes, FastImpactRunsAwayWithTheRadiusBoundButNotAheadNorWithTheFallback) 
   EXPECT_LT(fallback.exact_tests_per_step, bullet.exact_tests_per_step);
   EXPECT_LE(fallback.max_penetration, bullet.max_penetration);
   EXPECT_EQ(fallback.recall_strict_testable, 1.0);
+}
+
+TEST(Scenes, BandSharingLeavesACalmRunAsItWas) {
+  // Settings::runaway_sharing starts only when a pair goes over the runaway rule: on a calm scene
+  // the run is the same with it on and off, bit for bit (the same contacts, tests and depth).
+  if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
+  SceneParams p;
+  p.resolution = 400;
+  const Scene scene = makeScene("tori_pile", p);
+  RunOptions o;
+  o.truth = TruthMode::None;
+  const RunResult on = runPipeline(scene, Pipeline::Sensors, o);
+  o.runaway_sharing = false;
+  const RunResult off = runPipeline(scene, Pipeline::Sensors, o);
+  EXPECT_EQ(on.runaway_steps, 0u);
+  EXPECT_EQ(on.sharing_steps, 0u);
+  EXPECT_GT(on.contacts_found_total, 0u) << "the bodies must touch";
+  EXPECT_EQ(on.contacts_found_total, off.contacts_found_total);
+  EXPECT_EQ(on.exact_tests_per_step, off.exact_tests_per_step);
+  EXPECT_EQ(on.max_penetration, off.max_penetration);
+  EXPECT_EQ(on.intersections_max, off.intersections_max);
 }
 
 TEST(Scenes, TheContinuousTestCutsTunnellingThroughTheCloth) {

@@ -75,6 +75,14 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
                               const psc::CandidatePair* first, const psc::CandidatePair* last,
                               ContactSet contacts = ContactSet::AllPairs);
 
+/// [beyond] Settings::runaway_sharing on node_body.m_scontacts[from, end), the contacts of one
+/// direction of one body pair made at contact radius `radius` (the margins' sum): each contact
+/// whose node lies at least `radius` from its face point (at the contact's weights, in btScalar)
+/// has m_cfm[0] and m_cfm[1] divided by the number of such contacts of its node in the range, so
+/// together they weigh what one contact does. Contacts within the radius are left as they are.
+/// Returns how many contacts were changed (those whose node had two or more beyond the radius).
+std::size_t shareBandWeights(btSoftBody& node_body, int from, btScalar radius);
+
 // --- the geometry, in double -------------------------------------------------------------------
 
 /// The closest point of triangle (a, b, c) to p as barycentric weights (≥ 0, sum 1; weights[i]

@@ -81,6 +81,19 @@ struct Settings {
   /// every contact Bullet's radius accepts (README, "Fast bodies with Bullet's test", for what it
   /// changes on the fast scenes).
   bool runaway_fallback = false;
+  /// [beyond] With the discrete tests (Bullet, Robust): in a body pair that runs away, the contacts
+  /// that lie beyond the margins (inside Bullet's motion term, margins + 2·|m_x − m_q|) share
+  /// one contact's weight per node: each one's m_cfm is divided by how many such contacts its node
+  /// has against the other body (shareBandWeights, exact.h). Every contact is still made, and the
+  /// contacts within the margins keep Bullet's weights. It starts on the step the pair goes over
+  /// the runaway rule (that step's contacts included) and lasts until a step in which the pair has
+  /// no contact. Bullet's response pushes each contact's node out to its whole radius, so a node
+  /// with k contacts in the band is thrown back k times over, which grows its next motion term:
+  /// that loop is the runaway. On the fast scenes it ends the runaway within a few steps, without
+  /// the recall that Ahead (runaway_fallback) gives up (README, "Fast bodies with Bullet's test").
+  /// Calm pairs never reach the rule, so their contacts stay Bullet's, bit for bit. false: Bullet's
+  /// weights always.
+  bool runaway_sharing = true;
   OptIn opt_in = OptIn::VfSsFlag;
   /// [beyond] Also collide participating body pairs that have candidates but were not dispatched
   /// because their broadphase boxes do not overlap. Bullet 3.24 bounds a soft body by its nodes

@@ -59,6 +59,11 @@ struct Stats {
   std::size_t runaway_pairs = 0;
   /// Of those, the pairs put on the Ahead bound this step (Settings::runaway_fallback).
   std::size_t runaway_fallbacks = 0;
+  /// Body pairs whose contacts beyond the margins shared their weight this step
+  /// (Settings::runaway_sharing): the pairs that ran away this step or earlier and have not parted.
+  std::size_t sharing_pairs = 0;
+  /// Contacts of those pairs whose m_cfm was divided (their node had more than one beyond the margins).
+  std::size_t shared_contacts = 0;
   /// A warning for the first runaway pair this step, naming the two bodies (their indices in the
   /// world's soft body array) and the contact count; empty when there was none.
   std::string runaway;
