@@ -284,12 +284,11 @@ class Run {
   double midphaseBytesPerVertex(std::size_t vertices);
 
  private:
-  /// In the hook after collision detection: positions are m_x (predicted) and m_q (previous),
-  /// exactly what CollideVF_SS used, and m_scontacts holds this step's contacts.
-  void afterCollision();
   void compareWithTruth(StepRecord& rec);
-  /// After the plugin's action: this step's self contacts, and with RunOptions::self_collision and a
-  /// strict truth, their comparison with the self truth.
+  /// After the plugin's action: positions are still m_x (predicted) and m_q (previous), exactly
+  /// what CollideVF_SS used, and m_scontacts holds every contact of the step. Records the found
+  /// contacts (between bodies and self), the runaway rule, Bullet's exact tests, and their
+  /// comparison with the truths.
   void afterActions();
   void compareWithSelfTruth(StepRecord& rec);
   /// Triangles CollideVF_SS refuses outright (|cross|² ≤ SIMD_EPSILON), on bodies_ as last extracted.
@@ -423,7 +422,13 @@ void Run::step(StepRecord& rec) {
   current_ = nullptr;
 }
 
-void Run::afterCollision() {
+void Run::afterActions() {
+  const auto h0 = Clock::now();
+  // Every contact of the step is made by now: the plugin's action (before this one) collides the
+  // pairs Bullet's broadphase did not dispatch (Settings::beyond_broadphase) and the self pairs.
+  // Taken at the end of the dispatch instead, the found contacts missed the first: a fast body
+  // within its contact radius of another, but with boxes apart, counted as found nothing
+  // (projectile at 1,000 vertices: full recall 0.175 where it is 0.998).
   collectFound(world_, found_, found_self_);
   current_->n.contacts_found = found_.size();
   current_->n.runaway_pairs = runawayPairs(world_, found_, current_->runaway);
@@ -437,16 +442,6 @@ void Run::afterCollision() {
   }
   if (pipeline_ == Pipeline::Bullet) current_->n.exact_tests = countVFExactTests(world_.world());
   if (opt_.truth != TruthMode::None) compareWithTruth(*current_);
-}
-
-void Run::afterActions() {
-  const auto h0 = Clock::now();
-  // Every contact of the step is made by now: the plugin's action (before this one) collides the
-  // pairs Bullet's broadphase did not dispatch (Settings::beyond_broadphase) and the self pairs.
-  // Taken at the end of the dispatch instead, the found contacts missed the first: a fast body
-  // within its contact radius of another, but with boxes apart, counted as found nothing
-  // (projectile at 1,000 vertices: full recall 0.175 where it is 1.0).
-  afterCollision();
   current_->n.self_contacts_found = found_self_.size();
   if (opt_.self_collision && opt_.truth != TruthMode::None && truth_settings_.strict) compareWithSelfTruth(*current_);
   current_->ms.hooks += msSince(h0);

@@ -278,6 +278,14 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
 
 namespace {
 
+/// The squared distance, in btScalar, from a contact's node to its face's point at the contact's
+/// weights (BaryEval's order, as PSolve_SContacts evaluates the face point).
+btScalar contactDistance2(const btSoftBody::SContact& c) {
+  const btSoftBody::Face& f = *c.m_face;
+  const btVector3 p = f.m_n[0]->m_x * c.m_weights.x() + f.m_n[1]->m_x * c.m_weights.y() + f.m_n[2]->m_x * c.m_weights.z();
+  return (c.m_node->m_x - p).length2();
+}
+
 /// ContactSet::NearestFace on node_body.m_scontacts[from, end): of each node's contacts there, the
 /// discrete contact nearest to the node (the first of equals) and every crossing contact
 /// (`is_crossing`, parallel to the range; null: none) stay, in order. A node's contacts need not be
@@ -287,11 +295,6 @@ std::size_t keepNearestFace(btSoftBody& node_body, int from, const std::vector<c
   const int end = list.size();
   if (end - from < 2) return 0;
   const auto crossing = [&](int i) { return is_crossing != nullptr && (*is_crossing)[static_cast<std::size_t>(i - from)]; };
-  const auto distance2 = [](const btSoftBody::SContact& c) {
-    const btSoftBody::Face& f = *c.m_face;
-    const btVector3 p = f.m_n[0]->m_x * c.m_weights.x() + f.m_n[1]->m_x * c.m_weights.y() + f.m_n[2]->m_x * c.m_weights.z();
-    return (c.m_node->m_x - p).length2();
-  };
   // Per node of the body, the index of its nearest discrete contact so far (-1: none yet).
   thread_local std::vector<int> nearest;
   thread_local std::vector<btScalar> least;
@@ -305,7 +308,7 @@ std::size_t keepNearestFace(btSoftBody& node_body, int from, const std::vector<c
   for (int i = from; i < end; ++i) {
     if (crossing(i)) continue;
     const std::size_t n = nodeOf(i);
-    const btScalar d = distance2(list[i]);
+    const btScalar d = contactDistance2(list[i]);
     if (nearest[n] < 0 || d < least[n]) {
       nearest[n] = i;
       least[n] = d;
@@ -555,13 +558,9 @@ std::size_t shareBandWeights(btSoftBody& node_body, int from, btScalar radius) {
   const btSoftBody::Node* nodes = &node_body.m_nodes[0];
   const btScalar radius2 = radius * radius;
   for (int i = from; i < list.size(); ++i) {
-    const btSoftBody::SContact& c = list[i];
-    const btSoftBody::Face& f = *c.m_face;
-    const btVector3 p = f.m_n[0]->m_x * c.m_weights.x() + f.m_n[1]->m_x * c.m_weights.y() +
-                        f.m_n[2]->m_x * c.m_weights.z();
-    if ((c.m_node->m_x - p).length2() >= radius2) {
+    if (contactDistance2(list[i]) >= radius2) {
       in_band[static_cast<std::size_t>(i - from)] = 1;
-      ++band[static_cast<std::size_t>(c.m_node - nodes)];
+      ++band[static_cast<std::size_t>(list[i].m_node - nodes)];
     }
   }
   std::size_t changed = 0;

@@ -13,11 +13,19 @@
 
 #include <cmath>
 #include <cstdio>
+#include <string>
 
 namespace psc::demo {
 namespace {
 
 class EveryScene : public ::testing::TestWithParam<std::string> {};
+
+/// A scene at the given vertex count per body, the rest of its parameters as they default.
+Scene sceneAt(const std::string& name, std::size_t resolution) {
+  SceneParams p;
+  p.resolution = resolution;
+  return makeScene(name, p);
+}
 
 std::vector<Pipeline> pipelinesBuilt() {
   if (!SensorPipeline::available()) return {Pipeline::Bullet};
@@ -246,9 +254,7 @@ TEST(Scenes, FastImpactRunsAwayWithBulletsWeightsButNotWhenTheBandSharesNorAhead
   // the runaway fallback (Settings::runaway_fallback, here with Bullet's weights) the radius bound
   // runs away once, then the pair goes on the ahead bound.
   if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
-  SceneParams p;
-  p.resolution = 600;
-  const Scene scene = makeScene("fast_impact", p);
+  const Scene scene = sceneAt("fast_impact", 600);
   RunOptions o;
   o.truth = TruthMode::Both;
   const RunResult shared = runPipeline(scene, Pipeline::Sensors, o);
@@ -298,9 +304,7 @@ TEST(Scenes, FoundContactsIncludeThePairsCollidedBeyondTheBroadphase) {
   // benchmark must count those contacts as found: taken at the end of the dispatch instead, it
   // counted a fifth of the full truth (recall_full 0.175 at 1,000 vertices where it is 0.998).
   if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
-  SceneParams p;
-  p.resolution = 400;
-  const Scene scene = makeScene("projectile", p);
+  const Scene scene = sceneAt("projectile", 400);
   RunOptions o;
   o.truth = TruthMode::Full;
   o.penetration = false;
@@ -315,9 +319,7 @@ TEST(Scenes, BandSharingLeavesACalmRunAsItWas) {
   // Settings::runaway_sharing starts only when a pair goes over the runaway rule: on a calm scene
   // the run is the same with it on and off, bit for bit (the same contacts, tests and depth).
   if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
-  SceneParams p;
-  p.resolution = 400;
-  const Scene scene = makeScene("tori_pile", p);
+  const Scene scene = sceneAt("tori_pile", 400);
   RunOptions o;
   o.truth = TruthMode::None;
   const RunResult on = runPipeline(scene, Pipeline::Sensors, o);
@@ -339,9 +341,7 @@ TEST(Scenes, TheContinuousTestCutsTunnellingThroughTheCloth) {
   // With the same contact set the continuous test leaves fewer; with every contact, none, and no
   // edge crosses a triangle (README, "Fast bodies with --exact continuous").
   if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
-  SceneParams p;
-  p.resolution = 400;
-  const Scene scene = makeScene("fast_cloth", p);
+  const Scene scene = sceneAt("fast_cloth", 400);
   RunOptions o;
   o.truth = TruthMode::None;
   o.penetration = false;
@@ -363,9 +363,7 @@ TEST(Scenes, TheContinuousTestCutsTunnellingThroughTheCloth) {
 TEST(Scenes, HeadOnMeasurementChain) {
   // Long enough for the spheres to meet: every pipeline finds contacts, every contact is in the
   // truth, and the figures are printed for the record.
-  SceneParams p;
-  p.resolution = 300;
-  const Scene scene = makeScene("head_on", p);
+  const Scene scene = sceneAt("head_on", 300);
   std::vector<RunResult> runs;
   for (Pipeline pipeline : pipelinesBuilt()) {
     RunOptions o;
