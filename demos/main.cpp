@@ -132,9 +132,15 @@ int main(int argc, char** argv) {
                "predictMotion (psc::bullet::SoftBodySolver, the default here)");
   bool no_runaway_sharing = false;
   app.add_flag("--no-runaway-sharing", no_runaway_sharing,
-               "our pipelines: Bullet's contact weights always, even in a pair that runs away (without it, such a "
-               "pair's contacts beyond the margins share one contact's weight per node: "
-               "psc::bullet::Settings::runaway_sharing)");
+               "our pipelines: Bullet's contact weights in a pair that runs away (without it, such a pair's "
+               "contacts beyond the margins share one contact's weight per node: "
+               "psc::bullet::Settings::runaway_sharing); with --crowded-band 0 too, Bullet's weights always");
+  std::size_t crowded_band = psc::bullet::Settings{}.crowded_band;
+  app.add_option("--crowded-band", crowded_band,
+                 "our pipelines with --exact bullet or robust: a node with more than this many contacts beyond the "
+                 "margins against one body shares one contact's weight among them, in any pair "
+                 "(psc::bullet::Settings::crowded_band; default 32; 0: off)")
+      ->check(CLI::NonNegativeNumber);
   app.add_flag("--runaway-fallback", runaway_fallback,
                "our pipelines with --exact bullet or robust and the radius bound: a body pair that runs away goes "
                "on the ahead bound until its bodies part (psc::bullet::Settings::runaway_fallback)");
@@ -197,6 +203,7 @@ int main(int argc, char** argv) {
     options.run.refit_after_predict = !refit_in_step;
     options.run.runaway_fallback = runaway_fallback;
     options.run.runaway_sharing = !no_runaway_sharing;
+    options.run.crowded_band = crowded_band;
     options.run.contacts = contacts;
     options.run.frames_dir = frames;
     options.run.frame_every = frame_every;

@@ -115,6 +115,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   if (!r.motion_bound.empty()) j["motion_bound"] = r.motion_bound;
   if (r.pipeline != Pipeline::Bullet) j["runaway_fallback"] = r.runaway_fallback;
   if (r.pipeline != Pipeline::Bullet) j["runaway_sharing"] = r.runaway_sharing;
+  if (r.pipeline != Pipeline::Bullet) j["crowded_band"] = r.crowded_band;
   if (!r.contacts.empty()) j["contact_set"] = r.contacts;
   if (r.has_strict) {
     j["recall_strict"] = r.recall_strict;
@@ -182,6 +183,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
     j["fallback_pairs"] = r.fallback_pairs;
     j["sharing_steps"] = r.sharing_steps;
     j["shared_contacts"] = r.shared_contacts;
+    j["crowded_contacts"] = r.crowded_contacts;
     if (!r.pipeline_error.empty()) j["pipeline_error"] = r.pipeline_error;
   }
   if (!r.flagging.empty()) j["flagging"] = r.flagging;

@@ -232,6 +232,7 @@ RunResult describeRun(const Scene& scene, Pipeline pipeline, const RunOptions& o
   r.motion_bound = pipeline == Pipeline::Bullet ? "" : opt.exact == "continuous" ? "swept" : opt.motion_bound;
   r.runaway_fallback = pipeline != Pipeline::Bullet && opt.runaway_fallback;
   r.runaway_sharing = pipeline != Pipeline::Bullet && opt.runaway_sharing;
+  r.crowded_band = pipeline != Pipeline::Bullet ? opt.crowded_band : 0;
   if (pipeline != Pipeline::Bullet) r.contacts = opt.contacts;
   if (pipeline == Pipeline::Bullet && opt.bullet_clusters > 0) {
     r.bullet_clusters = opt.bullet_clusters;
@@ -361,6 +362,7 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
     o.refit_after_predict = opt.refit_after_predict;
     o.runaway_fallback = opt.runaway_fallback;
     o.runaway_sharing = opt.runaway_sharing;
+    o.crowded_band = opt.crowded_band;
     sensors_ = std::make_unique<SensorPipeline>(world_, o);
   }
   truth_settings_.strict = strict;
@@ -639,6 +641,7 @@ void summariseCounts(RunResult& r) {
     r.fallback_pairs += n.fallback_pairs;
     r.sharing_steps += n.sharing_pairs > 0 ? 1 : 0;
     r.shared_contacts += n.shared_contacts;
+    r.crowded_contacts += n.crowded_contacts;
     if (r.pipeline_error.empty() && !rec.error.empty()) r.pipeline_error = rec.error;
     r.truth_strict_total += n.truth_strict;
     r.truth_full_total += n.truth_full;

@@ -35,6 +35,7 @@
 // over the timed steps in which the pipeline found at least one soft-soft contact.
 #pragma once
 
+#include "psc/bullet/settings.h"
 #include "scenes.h"
 #include "step_record.h"
 
@@ -83,6 +84,8 @@ struct RunOptions {
   bool runaway_fallback = false;
   /// psc::bullet::Settings::runaway_sharing for our pipelines (--no-runaway-sharing: false).
   bool runaway_sharing = true;
+  /// psc::bullet::Settings::crowded_band for our pipelines (--crowded-band; 0: off).
+  std::size_t crowded_band = psc::bullet::Settings{}.crowded_band;
   /// psc::bullet::Settings::contacts for our pipelines: "all" or "nearest" (--contacts).
   std::string contacts = "all";
   /// > 0: a Bullet cluster run (only with Pipeline::Bullet): generateClusters(bullet_clusters) on
@@ -104,6 +107,7 @@ struct RunResult {
   std::string motion_bound;       ///< ours: "ahead", "radius" or "swept" (continuous); empty for Bullet's
   bool runaway_fallback = false;  ///< ours: RunOptions::runaway_fallback
   bool runaway_sharing = false;   ///< ours: RunOptions::runaway_sharing
+  std::size_t crowded_band = 0;   ///< ours: RunOptions::crowded_band
   std::string contacts;           ///< ours: RunOptions::contacts; empty for Bullet's
   bool self_collision = false;    ///< the pipeline itself: ours with RunOptions::self_collision, Bullet's cluster runs
   int bullet_clusters = 0;        ///< RunOptions::bullet_clusters (0: not a cluster run)
@@ -138,6 +142,9 @@ struct RunResult {
   /// Ours: steps in which some body pair's contacts beyond the margins shared their weight
   /// (psc::bullet::Stats::sharing_pairs > 0), and the contacts so changed, summed over the steps.
   std::size_t sharing_steps = 0, shared_contacts = 0;
+  /// Ours: of shared_contacts, those of crowded nodes in pairs that had not run away
+  /// (psc::bullet::Stats::crowded_contacts, Settings::crowded_band).
+  std::size_t crowded_contacts = 0;
   std::string pipeline_error;              ///< first error the plugin reported, if any
   // Timing, over the timed steps (per_step[warmup...]).
   std::size_t warmup = 0;                  ///< steps left out of the timing

@@ -30,6 +30,7 @@ SensorPipeline::SensorPipeline(SceneWorld& world, const Options& options) {
   settings.self_collision = options.self_collision;
   settings.runaway_fallback = options.runaway_fallback;
   settings.runaway_sharing = options.runaway_sharing;
+  settings.crowded_band = options.crowded_band;
   settings.exact = psc::bullet::exactTestFromString(options.exact);
   if (options.motion_bound == "radius") settings.sensors.motion_bound = psc::MotionBound::Radius;
   else if (options.motion_bound == "ahead") settings.sensors.motion_bound = psc::MotionBound::Ahead;
@@ -65,6 +66,7 @@ void SensorPipeline::takeStep(StepRecord& record) {
   n.reduced_contacts = s.reduced_contacts;
   n.sharing_pairs = s.sharing_pairs;
   n.shared_contacts = s.shared_contacts;
+  n.crowded_contacts = s.crowded_contacts;
   // The plugin's runaway rule counts what its exact test accepted, before a contact reduction:
   // with --contacts nearest the contacts found stay under the rule while a runaway goes on.
   if (s.runaway_pairs > n.runaway_pairs) {

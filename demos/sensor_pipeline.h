@@ -5,6 +5,7 @@
 #pragma once
 
 #include "bullet_scene.h"
+#include "psc/bullet/settings.h"
 #include "psc/settings.h"
 #include "step_record.h"
 
@@ -53,6 +54,7 @@ class SensorPipeline {
     bool refit_after_predict = true;
     bool runaway_fallback = false;  ///< Settings::runaway_fallback
     bool runaway_sharing = true;    ///< Settings::runaway_sharing
+    std::size_t crowded_band = psc::bullet::Settings{}.crowded_band;  ///< Settings::crowded_band
   };
   /// Installs the plugin on `world`'s soft bodies. A text option that names no choice throws
   /// psc::Error(InvalidArgument).

@@ -56,6 +56,7 @@ struct StepCounts {
   std::size_t particles = 0, flagged_pairs = 0, candidate_pairs = 0, round_cap_hits = 0, repartitions = 0;
   std::size_t fallback_pairs = 0;  ///< soft-soft pairs the plugin handed back to Bullet's algorithm
   std::size_t sharing_pairs = 0, shared_contacts = 0;  ///< psc::bullet::Stats::sharing_pairs, shared_contacts
+  std::size_t crowded_contacts = 0;                    ///< psc::bullet::Stats::crowded_contacts
   long rounds = 0;
   // Against the ground truth of this step's collision pass (all 0 without truth).
   std::size_t truth_strict = 0, truth_full = 0;          ///< truth contacts inside each radius

@@ -545,35 +545,49 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
   return counts;
 }
 
-std::size_t shareBandWeights(btSoftBody& node_body, int from, btScalar radius) {
+std::size_t shareBandWeights(btSoftBody& node_body, int from, btScalar radius, std::size_t above) {
   btAlignedObjectArray<btSoftBody::SContact>& list = node_body.m_scontacts;
-  if (from >= list.size()) return 0;
-  // Per node (by index), how many of its contacts in the range lie in the band; a node's
-  // contacts are not consecutive (the core's candidates come by region and chunk pair).
-  thread_local std::vector<int> band;
+  const std::size_t floor = std::max<std::size_t>(above, 1);
+  if (from >= list.size() || static_cast<std::size_t>(list.size() - from) <= floor) return 0;
+  // Per node (by index): first how many contacts it has in the range, then how many of them lie
+  // in the band. A node's contacts are not consecutive (the core's candidates come by region and
+  // chunk pair). Only a node with more than `floor` contacts can have more in its band, and the
+  // band's distances (which read the face's corners) are measured only for such nodes' contacts:
+  // in most pairs no node has that many, and the first pass, which reads only the node pointers,
+  // is all the cost.
+  thread_local std::vector<int> count;
   thread_local std::vector<char> in_band;
-  if (band.size() < static_cast<std::size_t>(node_body.m_nodes.size()))
-    band.resize(static_cast<std::size_t>(node_body.m_nodes.size()), 0);
-  in_band.assign(static_cast<std::size_t>(list.size() - from), 0);
+  const auto nodes_in_body = static_cast<std::size_t>(node_body.m_nodes.size());
+  if (count.size() < nodes_in_body) count.resize(nodes_in_body, 0);
   const btSoftBody::Node* nodes = &node_body.m_nodes[0];
-  const btScalar radius2 = radius * radius;
-  for (int i = from; i < list.size(); ++i) {
-    if (contactDistance2(list[i]) >= radius2) {
-      in_band[static_cast<std::size_t>(i - from)] = 1;
-      ++band[static_cast<std::size_t>(list[i].m_node - nodes)];
+  const auto nodeOf = [&](int i) { return static_cast<std::size_t>(list[i].m_node - nodes); };
+  const auto limit = static_cast<int>(floor);
+  bool crowded = false;
+  for (int i = from; i < list.size(); ++i) crowded |= ++count[nodeOf(i)] > limit;
+  std::size_t changed = 0;
+  if (crowded) {
+    // count[n] < 0 from here on: -(1 + the node's band contacts so far), for the nodes over the floor.
+    in_band.assign(static_cast<std::size_t>(list.size() - from), 0);
+    const btScalar radius2 = radius * radius;
+    for (int i = from; i < list.size(); ++i) {
+      int& k = count[nodeOf(i)];
+      if (k > limit) k = -1;
+      if (k < 0 && contactDistance2(list[i]) >= radius2) {
+        in_band[static_cast<std::size_t>(i - from)] = 1;
+        --k;
+      }
+    }
+    for (int i = from; i < list.size(); ++i) {
+      if (!in_band[static_cast<std::size_t>(i - from)]) continue;
+      const int band = -count[nodeOf(i)] - 1;
+      if (band <= limit) continue;
+      btSoftBody::SContact& c = list[i];
+      c.m_cfm[0] /= btScalar(band);
+      c.m_cfm[1] /= btScalar(band);
+      ++changed;
     }
   }
-  std::size_t changed = 0;
-  for (int i = from; i < list.size(); ++i) {
-    if (!in_band[static_cast<std::size_t>(i - from)]) continue;
-    btSoftBody::SContact& c = list[i];
-    const int k = band[static_cast<std::size_t>(c.m_node - nodes)];
-    if (k < 2) continue;
-    c.m_cfm[0] /= btScalar(k);
-    c.m_cfm[1] /= btScalar(k);
-    ++changed;
-  }
-  for (int i = from; i < list.size(); ++i) band[static_cast<std::size_t>(list[i].m_node - nodes)] = 0;
+  for (int i = from; i < list.size(); ++i) count[nodeOf(i)] = 0;
   return changed;
 }
 

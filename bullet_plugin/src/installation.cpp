@@ -188,15 +188,20 @@ void Installation::collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, p
   // The rule counts what the exact test accepted, before ContactSet::NearestFace kept the nearest.
   const std::size_t contacts = ab_counts.contacts + ab_counts.reduced + ba_counts.contacts + ba_counts.reduced;
   const bool runaway = isRunaway(a, b, contacts);
-  if (settings_.runaway_sharing && settings_.exact != ExactTest::Continuous) {
+  if (settings_.exact != ExactTest::Continuous) {
+    const btScalar radius = a.getCollisionShape()->getMargin() + b.getCollisionShape()->getMargin();
     // From the step the pair runs away (that step's contacts included) until it has none.
-    if (runaway) sharing_pairs_.insert(key);
+    if (settings_.runaway_sharing && runaway) sharing_pairs_.insert(key);
     if (contacts == 0) {
       sharing_pairs_.erase(key);
     } else if (sharing_pairs_.count(key) != 0) {
-      const btScalar radius = a.getCollisionShape()->getMargin() + b.getCollisionShape()->getMargin();
       stats_.shared_contacts += shareBandWeights(a, before_a, radius) + shareBandWeights(b, before_b, radius);
       ++stats_.sharing_pairs;
+    } else if (settings_.crowded_band > 0) {
+      const std::size_t crowded = shareBandWeights(a, before_a, radius, settings_.crowded_band) +
+                                  shareBandWeights(b, before_b, radius, settings_.crowded_band);
+      stats_.shared_contacts += crowded;
+      stats_.crowded_contacts += crowded;
     }
   }
   if (runaway && settings_.runaway_fallback && settings_.exact != ExactTest::Continuous &&

@@ -764,53 +764,69 @@ TEST(ExactTests, NearestFaceKeepsEachNodesNearestContactOfAllThoseAccepted) {
 }
 
 TEST(ExactTests, SharedBandWeightsDivideOnlyTheContactsBeyondTheMargins) {
-  // shareBandWeights (Settings::runaway_sharing) on the sheet's contacts with Bullet's and
-  // Robust's tests: the contacts whose node lies within the margins stay as they were, bit for bit;
-  // each one beyond them has its m_cfm divided by how many its node has beyond them, so that a
-  // node's band contacts together weigh one contact; nothing else changes, and the count returned
-  // is the number of contacts divided.
+  // shareBandWeights (Settings::runaway_sharing, `above` = 1, and Settings::crowded_band, larger
+  // `above`) on the sheet's contacts with Bullet's and Robust's tests: the contacts whose node lies
+  // within the margins stay as they were, bit for bit, and so do the band contacts of a node with
+  // no more than `above` of them; each band contact of a node with more has its m_cfm divided by
+  // how many its node has beyond the margins, so that they weigh one contact together; nothing else
+  // changes, and the count returned is the number of contacts divided.
   SheetRig rig;
   const btScalar radius = rig.node_body.getCollisionShape()->getMargin() + rig.face_body.getCollisionShape()->getMargin();
   for (ExactTest test : {ExactTest::Bullet, ExactTest::Robust}) {
-    const char* name = psc::bullet::toString(test);
-    psc::bullet::ExactCounts counts;
-    const std::vector<btSoftBody::SContact> before = rig.run(test, psc::bullet::ContactSet::AllPairs, counts);
-    const std::size_t changed = psc::bullet::shareBandWeights(rig.node_body, 0, radius);
-    ASSERT_EQ(std::size_t(rig.node_body.m_scontacts.size()), before.size()) << name << ": every contact stays";
-    // The reference band: the node's distance to the face point at the contact's weights, in float
-    // as the function measures it.
-    const auto inBand = [&](const btSoftBody::SContact& c) {
-      const btSoftBody::Face& f = *c.m_face;
-      const btVector3 p = f.m_n[0]->m_x * c.m_weights.x() + f.m_n[1]->m_x * c.m_weights.y() +
-                          f.m_n[2]->m_x * c.m_weights.z();
-      return (c.m_node->m_x - p).length2() >= radius * radius;
-    };
-    std::map<const btSoftBody::Node*, int> band;
-    for (const btSoftBody::SContact& c : before) band[c.m_node] += inBand(c) ? 1 : 0;
-    std::size_t divided = 0, kept = 0;
-    for (std::size_t i = 0; i < before.size(); ++i) {
-      const btSoftBody::SContact& was = before[i];
-      const btSoftBody::SContact& now = rig.node_body.m_scontacts[int(i)];
-      const int k = band[was.m_node];
-      if (!inBand(was) || k < 2) {
-        EXPECT_TRUE(psc_test::sameContact(was, now)) << name << ": contact " << i << " changed";
-        ++kept;
-        continue;
+    std::size_t divided_by_all = 0;
+    for (std::size_t above : {std::size_t{0}, std::size_t{1}, std::size_t{6}}) {
+      const std::string name = std::string(psc::bullet::toString(test)) + ", above " + std::to_string(above);
+      psc::bullet::ExactCounts counts;
+      const std::vector<btSoftBody::SContact> before = rig.run(test, psc::bullet::ContactSet::AllPairs, counts);
+      const std::size_t changed = psc::bullet::shareBandWeights(rig.node_body, 0, radius, above);
+      ASSERT_EQ(std::size_t(rig.node_body.m_scontacts.size()), before.size()) << name << ": every contact stays";
+      // The reference band: the node's distance to the face point at the contact's weights, in
+      // float as the function measures it.
+      const auto inBand = [&](const btSoftBody::SContact& c) {
+        const btSoftBody::Face& f = *c.m_face;
+        const btVector3 p = f.m_n[0]->m_x * c.m_weights.x() + f.m_n[1]->m_x * c.m_weights.y() +
+                            f.m_n[2]->m_x * c.m_weights.z();
+        return (c.m_node->m_x - p).length2() >= radius * radius;
+      };
+      std::map<const btSoftBody::Node*, int> band;
+      for (const btSoftBody::SContact& c : before) band[c.m_node] += inBand(c) ? 1 : 0;
+      const int floor = static_cast<int>(std::max<std::size_t>(above, 1));
+      std::size_t divided = 0, kept = 0, kept_in_band = 0;
+      for (std::size_t i = 0; i < before.size(); ++i) {
+        const btSoftBody::SContact& was = before[i];
+        const btSoftBody::SContact& now = rig.node_body.m_scontacts[int(i)];
+        const int k = band[was.m_node];
+        if (!inBand(was) || k <= floor) {
+          EXPECT_TRUE(psc_test::sameContact(was, now)) << name << ": contact " << i << " changed";
+          ++kept;
+          kept_in_band += inBand(was) ? 1 : 0;
+          continue;
+        }
+        ++divided;
+        EXPECT_EQ(now.m_cfm[0], was.m_cfm[0] / btScalar(k)) << name;
+        EXPECT_EQ(now.m_cfm[1], was.m_cfm[1] / btScalar(k)) << name;
+        EXPECT_TRUE(psc_test::sharedWeight(was, now, radius)) << name;
+        // Everything but the weights as it was.
+        btSoftBody::SContact restored = now;
+        restored.m_cfm[0] = was.m_cfm[0];
+        restored.m_cfm[1] = was.m_cfm[1];
+        EXPECT_TRUE(psc_test::sameContact(was, restored)) << name;
       }
-      ++divided;
-      EXPECT_EQ(now.m_cfm[0], was.m_cfm[0] / btScalar(k)) << name;
-      EXPECT_EQ(now.m_cfm[1], was.m_cfm[1] / btScalar(k)) << name;
-      // Everything but the weights as it was.
-      btSoftBody::SContact restored = now;
-      restored.m_cfm[0] = was.m_cfm[0];
-      restored.m_cfm[1] = was.m_cfm[1];
-      EXPECT_TRUE(psc_test::sameContact(was, restored)) << name;
+      EXPECT_EQ(changed, divided) << name;
+      EXPECT_GT(kept, 0u) << name << ": and some within them";
+      if (above <= 1) {
+        EXPECT_GT(divided, 100u) << name << ": the rig must give nodes several contacts beyond the margins";
+        divided_by_all = divided;
+      } else {
+        // The rig has nodes on both sides of the threshold.
+        EXPECT_GT(divided, 0u) << name;
+        EXPECT_GT(kept_in_band, 0u) << name;
+        EXPECT_LT(divided, divided_by_all) << name;
+      }
+      std::printf("shared band weights, %s: %zu of %zu contacts divided\n", name.c_str(), divided, before.size());
+      // Called again on what is left from `before`'s end: nothing to do.
+      EXPECT_EQ(psc::bullet::shareBandWeights(rig.node_body, rig.node_body.m_scontacts.size(), radius, above), 0u) << name;
     }
-    EXPECT_EQ(changed, divided) << name;
-    EXPECT_GT(divided, 100u) << name << ": the rig must give nodes several contacts beyond the margins";
-    EXPECT_GT(kept, 0u) << name << ": and some within them";
-    // Called again on what is left from `before`'s end: nothing to do.
-    EXPECT_EQ(psc::bullet::shareBandWeights(rig.node_body, rig.node_body.m_scontacts.size(), radius), 0u) << name;
   }
 }
 

@@ -246,7 +246,8 @@ TEST(Scenes, FastImpactRunsAwayWithBulletsWeightsButNotWhenTheBandSharesNorAhead
   // margins + 2|dx|, Bullet's response pushes each approaching node out to that whole radius, the
   // node comes back faster with a larger radius, and the contacts feed on themselves
   // (docs/BENCHMARK.md, "Runaways"). At 600 vertices the same runaway shows within 60 steps when
-  // every contact keeps Bullet's weight (Settings::runaway_sharing off). With the default, once the
+  // every contact keeps Bullet's weight (Settings::runaway_sharing off, crowded_band 0). With the
+  // default, crowded nodes share their band's weight from the start, and once the
   // pair goes over the runaway rule its contacts beyond the margins share one contact's weight per
   // node: the runaway ends within a few steps, every contact is still made (full recall above
   // Bullet's own path's), fewer tests than Bullet's own path, no penetration. MotionBound::Ahead
@@ -259,6 +260,7 @@ TEST(Scenes, FastImpactRunsAwayWithBulletsWeightsButNotWhenTheBandSharesNorAhead
   o.truth = TruthMode::Both;
   const RunResult shared = runPipeline(scene, Pipeline::Sensors, o);
   o.runaway_sharing = false;
+  o.crowded_band = 0;
   const RunResult radius = runPipeline(scene, Pipeline::Sensors, o);
   o.runaway_fallback = true;
   const RunResult fallback = runPipeline(scene, Pipeline::Sensors, o);
@@ -277,6 +279,8 @@ TEST(Scenes, FastImpactRunsAwayWithBulletsWeightsButNotWhenTheBandSharesNorAhead
   EXPECT_GE(radius.runaway_steps, 10u) << "the scene no longer shows the runaway it is kept for";
   EXPECT_GT(radius.exact_tests_per_step, bullet.exact_tests_per_step);
   EXPECT_EQ(radius.sharing_steps, 0u) << "off means off";
+  EXPECT_EQ(radius.crowded_contacts, 0u) << "off means off";
+  EXPECT_EQ(radius.shared_contacts, 0u) << "off means off";
   EXPECT_TRUE(shared.runaway_sharing);
   EXPECT_GT(shared.sharing_steps, 0u);
   EXPECT_GT(shared.runaway_steps, 0u) << "sharing starts with the first runaway step";
@@ -295,6 +299,34 @@ TEST(Scenes, FastImpactRunsAwayWithBulletsWeightsButNotWhenTheBandSharesNorAhead
   EXPECT_LT(fallback.exact_tests_per_step, bullet.exact_tests_per_step);
   EXPECT_LE(fallback.max_penetration, bullet.max_penetration);
   EXPECT_EQ(fallback.recall_strict_testable, 1.0);
+}
+
+TEST(Scenes, CrowdedBandsShareTheirWeightSoTheRealMeshesNoLongerCross) {
+  // mesh: three copies of Wuson.ply, whose smallest triangles are far smaller than the contact
+  // band, so a node coming down has dozens of contacts beyond the margins, each of which Bullet's
+  // response makes push it out to the whole band. With Bullet's weights (crowded_band 0) the bodies
+  // cross one another (46 edge–triangle crossings at most, 37k exact tests a step, 2026-11-26);
+  // with the default, a node with more than 32 such contacts shares one contact's weight among
+  // them: no crossing, a fifth of the tests, and every contact still made.
+  if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
+  SceneParams p;
+  const Scene scene = makeScene("mesh", p);
+  RunOptions o;
+  o.truth = TruthMode::None;
+  o.penetration = false;
+  const RunResult crowded = runPipeline(scene, Pipeline::Sensors, o);
+  o.crowded_band = 0;
+  const RunResult bullets = runPipeline(scene, Pipeline::Sensors, o);
+  for (const RunResult* r : {&crowded, &bullets})
+    std::printf("mesh, crowded_band %zu: crossings max %zu, exact/step %.1f, crowded contacts %zu, runaway steps %zu\n",
+                r->crowded_band, r->intersections_max, r->exact_tests_per_step, r->crowded_contacts, r->runaway_steps);
+  EXPECT_EQ(crowded.crowded_band, psc::bullet::Settings{}.crowded_band);
+  EXPECT_GT(crowded.crowded_contacts, 0u);
+  EXPECT_EQ(crowded.intersections_max, 0u);
+  EXPECT_EQ(bullets.crowded_contacts, 0u) << "off means off";
+  EXPECT_GT(bullets.intersections_max, 10u) << "the scene no longer shows what the setting is for";
+  EXPECT_LT(crowded.exact_tests_per_step, 0.5 * bullets.exact_tests_per_step);
+  EXPECT_EQ(crowded.runaway_steps, 0u);
 }
 
 TEST(Scenes, FoundContactsIncludeThePairsCollidedBeyondTheBroadphase) {

@@ -75,13 +75,15 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
                               const psc::CandidatePair* first, const psc::CandidatePair* last,
                               ContactSet contacts = ContactSet::AllPairs);
 
-/// [beyond] Settings::runaway_sharing on node_body.m_scontacts[from, end), the contacts of one
-/// direction of one body pair made at contact radius `radius` (the margins' sum): each contact
-/// whose node lies at least `radius` from its face point (at the contact's weights, in btScalar)
-/// has m_cfm[0] and m_cfm[1] divided by the number of such contacts of its node in the range, so
-/// together they weigh what one contact does. Contacts within the radius are left as they are.
-/// Returns how many contacts were changed (those whose node had two or more beyond the radius).
-std::size_t shareBandWeights(btSoftBody& node_body, int from, btScalar radius);
+/// [beyond] Settings::runaway_sharing and Settings::crowded_band on node_body.m_scontacts[from,
+/// end), the contacts of one direction of one body pair made at contact radius `radius` (the
+/// margins' sum). A contact lies in the band when its node is at least `radius` from its face point
+/// (at the contact's weights, in btScalar). Each node with more than max(above, 1) contacts in the
+/// band has their m_cfm[0] and m_cfm[1] divided by that number, so that together they weigh what
+/// one contact does. Contacts within the radius, and the band contacts of nodes with fewer, are
+/// left as they are. `above` = 1: every node with two or more (a pair that ran away); 32: only
+/// crowded nodes. Returns how many contacts were changed.
+std::size_t shareBandWeights(btSoftBody& node_body, int from, btScalar radius, std::size_t above = 1);
 
 // --- the geometry, in double -------------------------------------------------------------------
 

@@ -62,8 +62,12 @@ struct Stats {
   /// Body pairs whose contacts beyond the margins shared their weight this step
   /// (Settings::runaway_sharing): the pairs that ran away this step or earlier and have not parted.
   std::size_t sharing_pairs = 0;
-  /// Contacts of those pairs whose m_cfm was divided (their node had more than one beyond the margins).
+  /// Contacts whose m_cfm was divided this step: those of the sharing pairs (their node had more
+  /// than one beyond the margins), and in the other pairs those of crowded nodes (more than
+  /// Settings::crowded_band beyond the margins).
   std::size_t shared_contacts = 0;
+  /// Of shared_contacts, those of crowded nodes in pairs that have not run away.
+  std::size_t crowded_contacts = 0;
   /// A warning for the first runaway pair this step, naming the two bodies (their indices in the
   /// world's soft body array) and the contact count; empty when there was none.
   std::string runaway;
