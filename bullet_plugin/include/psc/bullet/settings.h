@@ -94,16 +94,17 @@ struct Settings {
   /// Pairs that never reach the rule keep Bullet's weights, except for crowded nodes (crowded_band).
   /// false: no pair-wide sharing (crowded_band still applies unless it is 0).
   bool runaway_sharing = true;
-  /// [beyond] With the discrete tests (Bullet, Robust), in every body pair: a node with more than
-  /// this many contacts beyond the margins against the other body shares one contact's weight
-  /// among them (their m_cfm divided by their count, as in a pair that ran away), before and
-  /// without any runaway. Such a node is thrown back by each of them; the number grows with the
-  /// band's area over the faces' (π·((margins + 2·|Δx|)² − d²) / face area), so fine meshes and
-  /// fast nodes reach it and coarse calm piles do not. Without it, 8 tori × 8,000 vertices with
-  /// `Robust` ran away at step 120 and filled the memory; with it they finish (README, "Crowded
-  /// bands"). 0: off, Bullet's weights wherever the pair has not run away. 32 was chosen over 16,
-  /// 24, 48 and 64 on the suite at 600, 1,000 and 2,000 vertices and five seeds of `mixed_pile`
-  /// (docs/DECISIONS.md, "Crowded bands share their weight").
+  /// [beyond] With the discrete tests (Bullet, Robust), in every pair of two bodies (a body's self
+  /// contacts keep Bullet's weights): a node with more than this many contacts beyond the margins
+  /// against the other body shares one contact's weight among them (their m_cfm divided by their
+  /// count, as in a pair that ran away), from the first step, with or without a runaway. Such a
+  /// node is thrown back once by each of them, and their number grows with the band's area over
+  /// the faces' (π·((margins + 2·|Δx|)² − d²) / face area): fine meshes and fast nodes reach it,
+  /// coarse calm piles do not. Without it, 8 tori × 8,000 vertices with `Robust` ran away at step
+  /// 120 and filled the memory; with it they finish (README, "Crowded bands"). 0: off, Bullet's
+  /// weights wherever the pair has not run away. 32 was chosen over 16, 24, 48 and 64 on the suite
+  /// at 600, 1,000 and 2,000 vertices and five seeds of `mixed_pile` (docs/DECISIONS.md, "Crowded
+  /// bands share their weight, in every pair").
   std::size_t crowded_band = 32;
   OptIn opt_in = OptIn::VfSsFlag;
   /// [beyond] Also collide participating body pairs that have candidates but were not dispatched
