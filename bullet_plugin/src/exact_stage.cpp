@@ -547,11 +547,11 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
 
 std::size_t shareBandWeights(btSoftBody& node_body, int from, btScalar radius, std::size_t above) {
   btAlignedObjectArray<btSoftBody::SContact>& list = node_body.m_scontacts;
-  const std::size_t floor = std::max<std::size_t>(above, 1);
-  if (from >= list.size() || static_cast<std::size_t>(list.size() - from) <= floor) return 0;
+  const std::size_t threshold = std::max<std::size_t>(above, 1);
+  if (from >= list.size() || static_cast<std::size_t>(list.size() - from) <= threshold) return 0;
   // Per node (by index): first how many contacts it has in the range, then how many of them lie
   // in the band. A node's contacts are not consecutive (the core's candidates come by region and
-  // chunk pair). Only a node with more than `floor` contacts can have more in its band, and the
+  // chunk pair). Only a node with more than `threshold` contacts can have more in its band, and the
   // band's distances (which read the face's corners) are measured only for such nodes' contacts:
   // in most pairs no node has that many, and the first pass, which reads only the node pointers,
   // is all the cost.
@@ -561,12 +561,13 @@ std::size_t shareBandWeights(btSoftBody& node_body, int from, btScalar radius, s
   if (count.size() < nodes_in_body) count.resize(nodes_in_body, 0);
   const btSoftBody::Node* nodes = &node_body.m_nodes[0];
   const auto nodeOf = [&](int i) { return static_cast<std::size_t>(list[i].m_node - nodes); };
-  const auto limit = static_cast<int>(floor);
+  // threshold < the range's size, an int.
+  const auto limit = static_cast<int>(threshold);
   bool crowded = false;
   for (int i = from; i < list.size(); ++i) crowded |= ++count[nodeOf(i)] > limit;
   std::size_t changed = 0;
   if (crowded) {
-    // count[n] < 0 from here on: -(1 + the node's band contacts so far), for the nodes over the floor.
+    // From here on count[n] < 0 for the nodes over the threshold: -(1 + their band contacts so far).
     in_band.assign(static_cast<std::size_t>(list.size() - from), 0);
     const btScalar radius2 = radius * radius;
     for (int i = from; i < list.size(); ++i) {
