@@ -41,9 +41,13 @@ bool sameContact(const btSoftBody::SContact& a, const btSoftBody::SContact& b) {
          sameBits(a.m_cfm[0], b.m_cfm[0]) && sameBits(a.m_cfm[1], b.m_cfm[1]);
 }
 
-/// `made` is Bullet's contact `bullets` with both weights divided by one whole k ≥ 2, and its
-/// node lies at least the margins' sum from its face point at the contact's weights (in btScalar,
-/// as psc::bullet::shareBandWeights measures the band).
+bool inBand(const btSoftBody::SContact& c, btScalar margins) {
+  const btSoftBody::Face& f = *c.m_face;
+  const btVector3 p = f.m_n[0]->m_x * c.m_weights.x() + f.m_n[1]->m_x * c.m_weights.y() + f.m_n[2]->m_x * c.m_weights.z();
+  return (c.m_node->m_x - p).length2() >= margins * margins;
+}
+
+/// `made` is Bullet's contact `bullets` with both weights divided by one whole k ≥ 2, in the band.
 bool sharedWeight(const btSoftBody::SContact& bullets, const btSoftBody::SContact& made, btScalar margins) {
   btSoftBody::SContact restored = made;
   restored.m_cfm[0] = bullets.m_cfm[0];
@@ -56,9 +60,7 @@ bool sharedWeight(const btSoftBody::SContact& bullets, const btSoftBody::SContac
   if (k < 2 || !sameBits(made.m_cfm[0], bullets.m_cfm[0] / btScalar(k)) ||
       !sameBits(made.m_cfm[1], bullets.m_cfm[1] / btScalar(k)))
     return false;
-  const btSoftBody::Face& f = *made.m_face;
-  const btVector3 p = f.m_n[0]->m_x * made.m_weights.x() + f.m_n[1]->m_x * made.m_weights.y() + f.m_n[2]->m_x * made.m_weights.z();
-  return (made.m_node->m_x - p).length2() >= margins * margins;
+  return inBand(made, margins);
 }
 
 ContactAudit auditContacts(const btAlignedObjectArray<btSoftBody*>& bodies) {

@@ -32,6 +32,10 @@ ContactAudit auditContacts(const btAlignedObjectArray<btSoftBody*>& bodies);
 /// Field for field, bit for bit (a NaN normal equals the same NaN; +0 and −0 differ).
 bool sameContact(const btSoftBody::SContact& a, const btSoftBody::SContact& b);
 
+/// The contact lies in the band psc::bullet::shareBandWeights shares: its node at least `margins`
+/// from its face point at the contact's weights, measured in btScalar as the function does.
+bool inBand(const btSoftBody::SContact& c, btScalar margins);
+
 /// `made` is Bullet's contact `bullets` (same node and face) but for a shared band weight: both
 /// m_cfm divided by one whole k ≥ 2, and its node at least `margins` from its face point at the
 /// contact's weights, in btScalar (psc::bullet::shareBandWeights).

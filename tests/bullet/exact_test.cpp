@@ -782,21 +782,16 @@ TEST(ExactTests, SharedBandWeightsDivideOnlyTheContactsBeyondTheMargins) {
       ASSERT_EQ(std::size_t(rig.node_body.m_scontacts.size()), before.size()) << name << ": every contact stays";
       // The reference band: the node's distance to the face point at the contact's weights, in
       // float as the function measures it.
-      const auto inBand = [&](const btSoftBody::SContact& c) {
-        const btSoftBody::Face& f = *c.m_face;
-        const btVector3 p = f.m_n[0]->m_x * c.m_weights.x() + f.m_n[1]->m_x * c.m_weights.y() +
-                            f.m_n[2]->m_x * c.m_weights.z();
-        return (c.m_node->m_x - p).length2() >= radius * radius;
-      };
+      const auto inBand = [&](const btSoftBody::SContact& c) { return psc_test::inBand(c, radius); };
       std::map<const btSoftBody::Node*, int> band;
       for (const btSoftBody::SContact& c : before) band[c.m_node] += inBand(c) ? 1 : 0;
-      const int floor = static_cast<int>(std::max<std::size_t>(above, 1));
+      const int threshold = static_cast<int>(std::max<std::size_t>(above, 1));
       std::size_t divided = 0, kept = 0, kept_in_band = 0;
       for (std::size_t i = 0; i < before.size(); ++i) {
         const btSoftBody::SContact& was = before[i];
         const btSoftBody::SContact& now = rig.node_body.m_scontacts[int(i)];
         const int k = band[was.m_node];
-        if (!inBand(was) || k <= floor) {
+        if (!inBand(was) || k <= threshold) {
           EXPECT_TRUE(psc_test::sameContact(was, now)) << name << ": contact " << i << " changed";
           ++kept;
           kept_in_band += inBand(was) ? 1 : 0;
