@@ -965,7 +965,11 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
       x = 0.5 * (x + q);
     }
     const double xn = ctx.axis.valid ? ctx.axis.project(x) : 0.0;
-    const double reach2 = swept ? 0.0 : reachOf(x, r);
+    // A self pair's radius is the self rule's (R + 2·selfMotion), not what Bullet's test accepts
+    // (R + 2·|Δx|, at least as far): no rounding slack, or the exact stage would make contacts
+    // beyond the rule (seen in the double build, where the truth's rounding band is too narrow to
+    // hide them).
+    const double reach2 = swept ? 0.0 : self_motion ? r * r : reachOf(x, r);
     // nearest_candidates: the probes need not reach past the band of the vertex's nearest so far
     // (the same bound chunkCandidates puts on each probe), so neither do the picking and the
     // kept-triangle box.
