@@ -95,11 +95,13 @@ int main(int argc, char** argv) {
                  "pipeline always uses Bullet's test")
       ->check(CLI::IsMember({"bullet", "robust", "continuous"}));
   app.add_option("--motion-bound", motion_bound,
-                 "our pipelines' motion bound with --exact bullet or robust: radius (the default: every pair "
-                 "inside Bullet's radius margins + 2|dx|) or ahead (of those, the pairs within the margins or "
-                 "that the node and the face head into during the next step); --exact continuous always "
-                 "uses the swept bound")
-      ->check(CLI::IsMember({"ahead", "radius"}));
+                 "our pipelines' motion bound: radius (the default: every pair inside Bullet's radius margins "
+                 "+ 2|dx|), ahead (of those, the pairs within the margins or that the node and the face head "
+                 "into during the next step) or swept (the pairs that meet within the margins during the step, "
+                 "the node's path against the face's swept volume: with --exact continuous its crossing test "
+                 "then also sees a slow node that a fast face sweeps over, but pairs in Bullet's radius that "
+                 "do not meet get no contact)")
+      ->check(CLI::IsMember({"ahead", "radius", "swept"}));
   app.add_option("--truth", truth, "ground truth: none, strict, full or both (default both)")
       ->check(CLI::IsMember({"none", "strict", "full", "both"}));
   app.add_option("--mesh", params.mesh_file, "OBJ/OFF/PLY/STL file for scene 8 ('mesh'); alone it selects scene 8");
@@ -137,7 +139,7 @@ int main(int argc, char** argv) {
                "psc::bullet::Settings::runaway_sharing); with --crowded-band 0 too, Bullet's weights always");
   std::size_t crowded_band = psc::bullet::Settings{}.crowded_band;
   app.add_option("--crowded-band", crowded_band,
-                 "our pipelines with --exact bullet or robust: a node with more than this many contacts beyond the "
+                 "our pipelines: a node with more than this many contacts beyond the "
                  "margins against one body shares one contact's weight among them, in any pair "
                  "(psc::bullet::Settings::crowded_band; default 32; 0: off)")
       ->check(CLI::NonNegativeNumber);

@@ -229,7 +229,7 @@ RunResult describeRun(const Scene& scene, Pipeline pipeline, const RunOptions& o
   if (pipeline == Pipeline::Sensors) r.flagging = toString(opt.flagging);
   if (pipeline == Pipeline::Bounds) r.flagging = "bounds";
   r.exact = pipeline == Pipeline::Bullet ? "bullet" : opt.exact;
-  r.motion_bound = pipeline == Pipeline::Bullet ? "" : opt.exact == "continuous" ? "swept" : opt.motion_bound;
+  r.motion_bound = pipeline == Pipeline::Bullet ? "" : opt.motion_bound;
   r.runaway_fallback = pipeline != Pipeline::Bullet && opt.runaway_fallback;
   r.runaway_sharing = pipeline != Pipeline::Bullet && opt.runaway_sharing;
   r.crowded_band = pipeline != Pipeline::Bullet ? opt.crowded_band : 0;

@@ -104,7 +104,7 @@ struct RunResult {
   Pipeline pipeline = Pipeline::Bullet;
   std::string flagging;           ///< ours: "default", "thesis" or "bounds"; empty for Bullet's
   std::string exact = "bullet";   ///< exact test of the run (Bullet's own pipeline: always bullet)
-  std::string motion_bound;       ///< ours: "ahead", "radius" or "swept" (continuous); empty for Bullet's
+  std::string motion_bound;       ///< ours: "ahead", "radius" or "swept"; empty for Bullet's
   bool runaway_fallback = false;  ///< ours: RunOptions::runaway_fallback
   bool runaway_sharing = false;   ///< ours: RunOptions::runaway_sharing
   std::size_t crowded_band = 0;   ///< ours: RunOptions::crowded_band

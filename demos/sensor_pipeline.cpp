@@ -34,7 +34,8 @@ SensorPipeline::SensorPipeline(SceneWorld& world, const Options& options) {
   settings.exact = psc::bullet::exactTestFromString(options.exact);
   if (options.motion_bound == "radius") settings.sensors.motion_bound = psc::MotionBound::Radius;
   else if (options.motion_bound == "ahead") settings.sensors.motion_bound = psc::MotionBound::Ahead;
-  else throw psc::Error(psc::ErrorCode::InvalidArgument, "motion bound '" + options.motion_bound + "' is not one of radius, ahead");
+  else if (options.motion_bound == "swept") settings.sensors.motion_bound = psc::MotionBound::Swept;
+  else throw psc::Error(psc::ErrorCode::InvalidArgument, "motion bound '" + options.motion_bound + "' is not one of radius, ahead, swept");
   if (options.contacts == "all") settings.contacts = psc::bullet::ContactSet::AllPairs;
   else if (options.contacts == "nearest") settings.contacts = psc::bullet::ContactSet::NearestFace;
   else throw psc::Error(psc::ErrorCode::InvalidArgument, "contact set '" + options.contacts + "' is not one of all, nearest");

@@ -40,8 +40,8 @@ class SensorPipeline {
     psc::Flagging flagging = psc::Flagging::SensorsAndBounds;
     /// The exact test, "bullet", "robust" or "continuous" (psc::bullet::ExactTest).
     std::string exact = "bullet";
-    /// Settings::sensors.motion_bound, "radius" (MotionBound::Radius) or "ahead" (MotionBound::Ahead);
-    /// exact = "continuous" uses MotionBound::Swept whatever it says.
+    /// Settings::sensors.motion_bound, "radius" (MotionBound::Radius), "ahead" (MotionBound::Ahead)
+    /// or "swept" (MotionBound::Swept).
     std::string motion_bound = "radius";
     /// Settings::contacts, "all" (ContactSet::AllPairs) or "nearest" (ContactSet::NearestFace).
     std::string contacts = "all";

@@ -141,16 +141,16 @@ Vec3 normalWithoutDistance(const btSoftBody::Node& node, const btSoftBody::Face&
 ContactKind robustContact(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
                           btScalar m, btSoftBody::SContact& contact);
 
-/// Bullet's CollideVF_SS decision and contact (Robust = false), or Robust's (true). Without
-/// `motion_term` the radius is the margins alone (Continuous), not margins + 2·|m_x − m_q|.
+/// Bullet's CollideVF_SS decision and contact (Robust = false), or Robust's (true): both at
+/// Bullet's radius, margins + 2·|m_x − m_q|.
 ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::Node& node,
-                         const btSoftBody::Face& face, btSoftBody::SContact& contact, bool motion_term = true) {
+                         const btSoftBody::Face& face, btSoftBody::SContact& contact) {
   const btVector3 o = node.m_x;
   btVector3 p(0, 0, 0);  // read only when d was set, i.e. together with p
   btScalar d = SIMD_INFINITY;
   bool skipped = false;
   bulletProjectOrigin(face.m_n[0]->m_x - o, face.m_n[1]->m_x - o, face.m_n[2]->m_x - o, p, d, skipped);
-  const btScalar m = motion_term ? ctx.mrg + (o - node.m_q).length() * 2 : ctx.mrg;
+  const btScalar m = ctx.mrg + (o - node.m_q).length() * 2;
   if (d < (m * m)) {
     if (!robust || d > 0) {
       const btSoftBody::Node* n[] = {face.m_n[0], face.m_n[1], face.m_n[2]};
@@ -181,16 +181,18 @@ ContactKind robustContact(const PairContext& ctx, const btSoftBody::Node& node, 
 }
 
 /// Continuous: a node that passed through the face during the step (and ends behind it) gets a
-/// contact back to the side it came from, replacing the discrete one; otherwise Robust's test
-/// within the margins alone. Bullet's motion term (2·|m_x − m_q|) is what stands in for a
-/// continuous test in CollideVF_SS; with the crossing test it is not needed, and its contacts
-/// push a fast node out to twice its step, i.e. throw it back faster than it came.
+/// contact back to the side it came from, replacing the discrete one; otherwise Robust's test, at
+/// Bullet's radius. (Until 2026-11-26 the discrete part had the margins alone, without Bullet's
+/// motion term, so as not to throw fast nodes back at twice their step; with the band's weights
+/// shared (Settings::runaway_sharing, crowded_band) the motion term's push is what keeps fast
+/// bodies from crossing edge through face, which no vertex–face crossing test sees:
+/// docs/DECISIONS.md, "Continuous keeps Bullet's radius".)
 ContactKind crossingOver(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
                          ContactKind discrete, btSoftBody::SContact& contact);
 
 ContactKind continuousTest(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
                            btSoftBody::SContact& contact) {
-  return crossingOver(ctx, node, face, discreteTest(true, ctx, node, face, contact, false), contact);
+  return crossingOver(ctx, node, face, discreteTest(true, ctx, node, face, contact), contact);
 }
 
 /// Continuous's second half: given the discrete test's outcome (`discrete`, `contact`), the
@@ -356,7 +358,7 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
       collide.Process(&node_leaf, &face_leaf);
       return ContactKind::None;
     }
-    return discreteTest(true, ctx, node, face, contact, !continuous);
+    return discreteTest(true, ctx, node, face, contact);
   };
   const auto finish = [&](const btSoftBody::Node& node, const btSoftBody::Face& face, ContactKind kind) {
     if (continuous) kind = crossingOver(ctx, node, face, kind, contact);
@@ -395,7 +397,7 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
       in.bx[l] = nb.m_x.x(), in.by[l] = nb.m_x.y(), in.bz[l] = nb.m_x.z(), in.ib[l] = nb.m_im;
       in.cx[l] = nc.m_x.x(), in.cy[l] = nc.m_x.y(), in.cz[l] = nc.m_x.z(), in.ic[l] = nc.m_im;
     }
-    d::vfLanes(in, ctx.mrg, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, robust, !continuous, out);
+    d::vfLanes(in, ctx.mrg, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, robust, out);
     if ((out.contact | out.scalar | out.robust) == 0 && !continuous) continue;
     for (int l = 0; l < d::kVfLanes; ++l) {
       const std::uint32_t bit = 1u << l;
@@ -573,7 +575,9 @@ std::size_t shareBandWeights(btSoftBody& node_body, int from, btScalar radius, s
     for (int i = from; i < list.size(); ++i) {
       int& k = count[nodeOf(i)];
       if (k > limit) k = -1;
-      if (k < 0 && contactDistance2(list[i]) >= radius2) {
+      // A contact's m_margin is the radius it was accepted at: one made at the margins alone
+      // (Continuous's crossing contacts) is never a band contact, wherever its node lies.
+      if (k < 0 && list[i].m_margin > radius && contactDistance2(list[i]) >= radius2) {
         in_band[static_cast<std::size_t>(i - from)] = 1;
         --k;
       }

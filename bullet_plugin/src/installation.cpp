@@ -68,22 +68,13 @@ std::pair<const psc::CandidatePair*, const psc::CandidatePair*> candidatesOf(
   return {base + (first - candidates.begin()), base + (last - candidates.begin())};
 }
 
-/// The core's settings for this plugin: Continuous's crossing test needs every pair that meets
-/// during the step (MotionBound::Swept), not Bullet's radius about the end positions. Robust with
-/// ContactSet::NearestFace needs only each node's nearest faces: Robust accepts every pair within
+/// The core's settings for this plugin. Robust with ContactSet::NearestFace needs only each node's nearest faces: Robust accepts every pair within
 /// the radius, so the nearest accepted contact is among them (SensorSettings::nearest_candidates).
 /// Bullet's test refuses small faces, where a farther face could give the node its contact: it
 /// gets every candidate.
 psc::SensorSettings coreSettings(const Settings& settings) {
   psc::SensorSettings core = settings.sensors;
   if (settings.contacts == ContactSet::NearestFace && settings.exact == ExactTest::Robust) core.nearest_candidates = true;
-  if (settings.exact == ExactTest::Continuous) {
-    if (core.flagging == psc::Flagging::Sensors)
-      throw psc::Error(psc::ErrorCode::InvalidSettings,
-                       "psc::bullet::Settings: exact = Continuous needs the swept motion bound, which "
-                       "sensors.flagging = Sensors (the thesis's flag-only mode) does not support");
-    core.motion_bound = psc::MotionBound::Swept;
-  }
   return core;
 }
 
@@ -188,21 +179,20 @@ void Installation::collidePair(btSoftBody& a, psc::BodyId id_a, btSoftBody& b, p
   // The rule counts what the exact test accepted, before ContactSet::NearestFace kept the nearest.
   const std::size_t contacts = ab_counts.contacts + ab_counts.reduced + ba_counts.contacts + ba_counts.reduced;
   const bool runaway = isRunaway(a, b, contacts);
-  if (settings_.exact != ExactTest::Continuous) {
-    const btScalar radius = a.getCollisionShape()->getMargin() + b.getCollisionShape()->getMargin();
-    // From the step the pair runs away (that step's contacts included) until it has none.
-    if (settings_.runaway_sharing && runaway) sharing_pairs_.insert(key);
-    if (contacts == 0) {
-      sharing_pairs_.erase(key);
-    } else if (sharing_pairs_.count(key) != 0) {
-      stats_.shared_contacts += shareBandWeights(a, before_a, radius) + shareBandWeights(b, before_b, radius);
-      ++stats_.sharing_pairs;
-    } else if (settings_.crowded_band > 0) {
-      const std::size_t crowded = shareBandWeights(a, before_a, radius, settings_.crowded_band) +
-                                  shareBandWeights(b, before_b, radius, settings_.crowded_band);
-      stats_.shared_contacts += crowded;
-      stats_.crowded_contacts += crowded;
-    }
+  // Every exact test (Continuous's crossing contacts, made at the margins, are never in the band).
+  const btScalar radius = a.getCollisionShape()->getMargin() + b.getCollisionShape()->getMargin();
+  // From the step the pair runs away (that step's contacts included) until it has none.
+  if (settings_.runaway_sharing && runaway) sharing_pairs_.insert(key);
+  if (contacts == 0) {
+    sharing_pairs_.erase(key);
+  } else if (sharing_pairs_.count(key) != 0) {
+    stats_.shared_contacts += shareBandWeights(a, before_a, radius) + shareBandWeights(b, before_b, radius);
+    ++stats_.sharing_pairs;
+  } else if (settings_.crowded_band > 0) {
+    const std::size_t crowded = shareBandWeights(a, before_a, radius, settings_.crowded_band) +
+                                shareBandWeights(b, before_b, radius, settings_.crowded_band);
+    stats_.shared_contacts += crowded;
+    stats_.crowded_contacts += crowded;
   }
   if (runaway && settings_.runaway_fallback && settings_.exact != ExactTest::Continuous &&
       settings_.sensors.motion_bound == psc::MotionBound::Radius && !sensors_.pairAhead(id_a, id_b)) {

@@ -54,8 +54,7 @@ void allowVfLanes(bool allowed);
 
 /// Runs the eight lanes. `mrg`: the contact radius without motion (CollideVF_SS::mrg); `kshr0` /
 /// `kshr1`: m_cfg.kSHR of the node's and the face's body. `robust`: also flag Robust's lanes in
-/// `scalar`. `motion_term` false: the radius is mrg alone (Continuous's discrete test), not
-/// mrg + 2·|m_x − m_q|. Only call when vfLanesEnabled().
-void vfLanes(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust, bool motion_term, VfLanesOut& out);
+/// `scalar`. The radius is Bullet's, mrg + 2·|m_x − m_q|. Only call when vfLanesEnabled().
+void vfLanes(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust, VfLanesOut& out);
 
 }  // namespace psc::bullet::detail

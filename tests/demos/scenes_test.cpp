@@ -329,8 +329,9 @@ TEST(Scenes, CrowdedBandsShareTheirWeightSoTheRealMeshesNoLongerCross) {
   // FLT_EPSILON), which lets the bodies sink into each other with Bullet's weights. In double
   // precision it accepts them and the scene does not cross with either setting (measured
   // 2026-11-26: 0 crossings with crowded_band 0 too).
-  if (machineInfo().bullet_precision == "single")
+  if (machineInfo().bullet_precision == "single") {
     EXPECT_GT(bullets.intersections_max, 10u) << "the scene no longer shows what the setting is for";
+  }
   EXPECT_LT(crowded.exact_tests_per_step, 0.5 * bullets.exact_tests_per_step);
   EXPECT_EQ(crowded.runaway_steps, 0u);
 }
@@ -377,7 +378,8 @@ TEST(Scenes, TheContinuousTestCutsTunnellingThroughTheCloth) {
   // (ContactSet::NearestFace) and Bullet's discrete test, vertices pass through the other body's
   // triangles during a step with no contact at all: the scene and the measure show tunnelling.
   // With the same contact set the continuous test leaves fewer; with every contact, none, and no
-  // edge crosses a triangle (README, "Fast bodies with --exact continuous").
+  // edge crosses a triangle (README, "Fast bodies with --exact continuous"): Continuous makes
+  // every contact of Bullet's radius (the default radius bound) and adds the crossing contacts.
   if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
   const Scene scene = sceneAt("fast_cloth", 400);
   RunOptions o;
@@ -389,13 +391,24 @@ TEST(Scenes, TheContinuousTestCutsTunnellingThroughTheCloth) {
   const RunResult nearest_continuous = runPipeline(scene, Pipeline::Sensors, o);
   o.contacts = "all";
   const RunResult continuous = runPipeline(scene, Pipeline::Sensors, o);
-  for (const RunResult* r : {&nearest, &nearest_continuous, &continuous})
-    std::printf("fast_cloth 400v %s, %s contacts: tunnelled %zu (worst step %zu), crossings max %zu\n", r->exact.c_str(),
-                r->contacts.c_str(), r->tunnelled_total, r->tunnelled_worst_step, r->intersections_max);
+  // The swept bound (Continuous's only bound until 2026-11-26) tests the pairs that meet during the
+  // step and leaves out the rest of Bullet's radius: nothing tunnels, but edges cross faces.
+  o.motion_bound = "swept";
+  const RunResult swept = runPipeline(scene, Pipeline::Sensors, o);
+  for (const RunResult* r : {&nearest, &nearest_continuous, &continuous, &swept})
+    std::printf("fast_cloth 400v %s, %s contacts, %s bound: tunnelled %zu (worst step %zu), crossings max %zu\n",
+                r->exact.c_str(), r->contacts.c_str(), r->motion_bound.c_str(), r->tunnelled_total,
+                r->tunnelled_worst_step, r->intersections_max);
   EXPECT_GT(nearest.tunnelled_total, 0u) << "the scene no longer shows tunnelling";
   EXPECT_LT(nearest_continuous.tunnelled_total, nearest.tunnelled_total);
+  EXPECT_EQ(continuous.motion_bound, "radius");
   EXPECT_EQ(continuous.tunnelled_total, 0u);
   EXPECT_EQ(continuous.intersections_max, 0u);
+  EXPECT_EQ(swept.motion_bound, "swept");
+  EXPECT_EQ(swept.tunnelled_total, 0u);
+  if (machineInfo().bullet_precision == "single") {
+    EXPECT_GT(swept.intersections_max, 0u) << "the swept bound no longer shows why it is not the default";
+  }
 }
 
 TEST(Scenes, HeadOnMeasurementChain) {

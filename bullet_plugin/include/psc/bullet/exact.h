@@ -77,8 +77,9 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
 
 /// [beyond] Settings::runaway_sharing and Settings::crowded_band on node_body.m_scontacts[from,
 /// end), the contacts of one direction of one body pair made at contact radius `radius` (the
-/// margins' sum). A contact lies in the band when its node is at least `radius` from its face point
-/// (at the contact's weights, in btScalar). Each node with more than max(above, 1) contacts in the
+/// margins' sum). A contact lies in the band when it was accepted at more than `radius` (m_margin >
+/// radius: not a Continuous crossing contact, made at the margins) and its node is at least
+/// `radius` from its face point (at the contact's weights, in btScalar). Each node with more than max(above, 1) contacts in the
 /// band has their m_cfm[0] and m_cfm[1] divided by that number, so that together they weigh what
 /// one contact does. Contacts within the radius, and the band contacts of nodes with fewer, are
 /// left as they are. `above` = 1: every node with two or more (a pair that ran away); 32: only

@@ -31,15 +31,21 @@ enum class ExactTest {
   /// arithmetic skipped the face or an edge as too small, the exact closest point computed in
   /// double with relative thresholds, so no contact depends on the unit of length.
   Robust,
-  /// Robust's test within the margins alone (no 2·|m_x − m_q| motion term; contact margin = the
-  /// margins), plus a continuous test over the step (m_q → m_x, linear motion of the node and of
-  /// the face's nodes): a node that passes through the face during the step gets a contact that
-  /// pushes it back to the side it came from (instead of Bullet's, whose normal points through).
-  /// Its discrete contacts against the same body keep their weights but take their face's normal
-  /// towards the side the node started on, so the faces next to the crossed one (a dent under an
-  /// impact) hold it too (exact.h). The crossing test does what Bullet's motion term stands in
-  /// for, without its contacts that throw fast nodes back at twice their speed. The plugin runs
-  /// the core with MotionBound::Swept for it: far fewer candidates than Bullet's radius on fast bodies.
+  /// Robust's test (Bullet's radius, margins + 2·|m_x − m_q|), plus a continuous test over the
+  /// step (m_q → m_x, linear motion of the node and of the face's nodes): a node that passes
+  /// through the face during the step gets a contact that pushes it back to the side it came from
+  /// (instead of Bullet's, whose normal points through), at the margins. Its discrete contacts
+  /// against the same body keep their weights but take their face's normal towards the side the
+  /// node started on, so the faces next to the crossed one (a dent under an impact) hold it too
+  /// (exact.h). runaway_sharing and crowded_band apply to its discrete contacts as to Robust's.
+  /// Its candidates are those of `sensors.motion_bound`: with Radius (the default) every pair
+  /// within Bullet's radius, so it makes every contact Robust makes, and the crossing test runs on
+  /// those pairs; with Swept the pairs that meet during the step (within the margins along both
+  /// paths), so it also tests a slow node that a fast face sweeps over, but makes no contact for a
+  /// pair within Bullet's radius that does not meet. Swept was the only choice until 2026-11-26,
+  /// with the margins alone as the discrete radius; on the fast scenes the radius bound and Bullet's
+  /// radius left no edge–triangle crossing and no tunnelled vertex at 300 to 2,000 vertices, where
+  /// that had both (docs/DECISIONS.md, "Continuous keeps Bullet's radius").
   Continuous,
 };
 
@@ -81,7 +87,7 @@ struct Settings {
   /// every contact Bullet's radius accepts (README, "Fast bodies with Bullet's test", for what it
   /// changes on the fast scenes).
   bool runaway_fallback = false;
-  /// [beyond] With the discrete tests (Bullet, Robust): in a body pair that runs away, the contacts
+  /// [beyond] With every exact test: in a body pair that runs away, the contacts
   /// that lie beyond the margins (inside Bullet's motion term, margins + 2·|m_x − m_q|) share
   /// one contact's weight per node: each one's m_cfm is divided by how many such contacts its node
   /// has against the other body (shareBandWeights, exact.h). Every contact is still made, and the
@@ -94,7 +100,7 @@ struct Settings {
   /// Pairs that never reach the rule keep Bullet's weights, except for crowded nodes (crowded_band).
   /// false: no pair-wide sharing (crowded_band still applies unless it is 0).
   bool runaway_sharing = true;
-  /// [beyond] With the discrete tests (Bullet, Robust), in every pair of two bodies (a body's self
+  /// [beyond] With every exact test, in every pair of two bodies (a body's self
   /// contacts keep Bullet's weights): a node with more than this many contacts beyond the margins
   /// against the other body shares one contact's weight among them (their m_cfm divided by their
   /// count, as in a pair that ran away), from the first step, with or without a runaway. Such a
@@ -114,9 +120,8 @@ struct Settings {
   /// applies (collision groups and masks, the pair cache's overlap filter callback,
   /// btCollisionObject::checkCollideWith, deactivation). false: only dispatched pairs are collided.
   bool beyond_broadphase = true;
-  /// The exact test on the candidates. Continuous needs the candidates to include every pair whose
-  /// node's segment (m_q → m_x) meets the face's swept volume (exact.h, firstCrossing): with it the
-  /// plugin sets `sensors.motion_bound` to MotionBound::Swept whatever it says here.
+  /// The exact test on the candidates (see ExactTest; for Continuous, `sensors.motion_bound`
+  /// decides which pairs its crossing test sees).
   ExactTest exact = ExactTest::Bullet;
   /// Which of its contacts reach the solver: all (Bullet's model, the default) or the nearest face
   /// per node and body.
