@@ -80,6 +80,20 @@ BodyDesc selfColliding(const TriMesh& mesh, double margin) {
   return d;
 }
 
+/// f(v, t, distance now) for every pair of `mesh` that the self exclusion rule leaves in: the
+/// triangle does not hold the vertex, and the two were at least `exclusion` apart in `rest`.
+template <class F>
+void forEachPairBeyondTheRule(const TriMesh& mesh, const std::vector<Vec3>& rest, const std::vector<Vec3>& now,
+                              double exclusion, F&& f) {
+  for (Index v = 0; v < now.size(); ++v)
+    for (Index t = 0; t < mesh.triangles.size(); ++t) {
+      const Triangle& tri = mesh.triangles[t];
+      if (tri[0] == v || tri[1] == v || tri[2] == v) continue;
+      if (testkit::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) < exclusion) continue;
+      f(v, t, testkit::pointTriangleDistance(now[v], now[tri[0]], now[tri[1]], now[tri[2]]));
+    }
+}
+
 /// The mean edge of makePatch(w, h, nx, ny) in closed form: (nx−1)·ny edges of w/(nx−1) along x,
 /// nx·(ny−1) of h/(ny−1) along y and (nx−1)·(ny−1) diagonals.
 double patchMeanEdge(double w, double h, double nx, double ny) {
@@ -188,25 +202,18 @@ TEST(SelfCollision, ABodyMeetsItselfByItsMotionAgainstItselfNotByItsSpeed) {
     mean /= double(now.size());
     std::set<std::pair<Index, Index>> expected;
     std::size_t bullet_would = 0;
-    for (Index v = 0; v < now.size(); ++v) {
+    forEachPairBeyondTheRule(cloth, rest, now, w.settings().self_rest_exclusion * radius,
+                             [&](Index v, Index t, double dist) {
       const Vec3 disp = now[v] - before[v];
       const double reach = radius + mf * selfMotion(disp, mean);
-      for (Index t = 0; t < cloth.triangles.size(); ++t) {
-        const Triangle& tri = cloth.triangles[t];
-        if (tri[0] == v || tri[1] == v || tri[2] == v) continue;
-        if (testkit::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) <
-            w.settings().self_rest_exclusion * radius)
-          continue;
-        const double dist = testkit::pointTriangleDistance(now[v], now[tri[0]], now[tri[1]], now[tri[2]]);
-        bullet_would += dist < radius + mf * disp.norm();
-        if (dist < reach * (1.0 - 1e-6)) expected.insert({v, t});
-        // Nothing beyond the self rule's radius, not even by a rounding slack (the exact stage
-        // makes a contact of every self candidate: Bullet's radius R + 2·|d| is wider).
-        if (got.count({v, t})) {
-          EXPECT_LT(dist, reach * (1.0 + 1e-12)) << v << ", " << t;
-        }
+      bullet_would += dist < radius + mf * disp.norm();
+      if (dist < reach * (1.0 - 1e-6)) expected.insert({v, t});
+      // Nothing beyond the self rule's radius, not even by a rounding slack (the exact stage
+      // makes a contact of every self candidate: Bullet's radius R + 2·|d| is wider).
+      if (got.count({v, t})) {
+        EXPECT_LT(dist, reach * (1.0 + 1e-12)) << v << ", " << t;
       }
-    }
+    });
     EXPECT_GT(bullet_would, 1000u) << "the speed alone would make the layers meet";
     std::size_t missed = 0;
     for (const auto& p : expected) missed += got.count(p) == 0;
@@ -240,17 +247,10 @@ TEST(SelfCollision, NoSelfCandidateLiesBeyondTheSelfRadiusNotEvenByARoundingSlac
   std::size_t dup = 0;
   const std::set<std::pair<Index, Index>> got = selfCandidates(w.step(), id, dup);
   std::size_t within_slack = 0, within_radius = 0;
-  for (Index v = 0; v < now.size(); ++v)
-    for (Index t = 0; t < cloth.triangles.size(); ++t) {
-      const Triangle& tri = cloth.triangles[t];
-      if (tri[0] == v || tri[1] == v || tri[2] == v) continue;
-      if (testkit::pointTriangleDistance(rest[v], rest[tri[0]], rest[tri[1]], rest[tri[2]]) <
-          w.settings().self_rest_exclusion * radius)
-        continue;
-      const double dist = testkit::pointTriangleDistance(now[v], now[tri[0]], now[tri[1]], now[tri[2]]);
-      within_radius += dist < radius;
-      within_slack += dist < radius * (1.0 + 1e-5);
-    }
+  forEachPairBeyondTheRule(cloth, rest, now, w.settings().self_rest_exclusion * radius, [&](Index, Index, double dist) {
+    within_radius += dist < radius;
+    within_slack += dist < radius * (1.0 + 1e-5);
+  });
   EXPECT_EQ(within_radius, 0u);
   EXPECT_GT(within_slack, 500u) << "the layers must lie within a two-body pair's slack";
   EXPECT_TRUE(got.empty()) << got.size() << " self candidates beyond the self radius";
