@@ -71,7 +71,8 @@ Vec3 load(const char* base, std::size_t stride, Index v) {
 // index order, i.e. through the positions' memory in order, reading the view's raw scalars (no
 // per-call type switch), and grows the box of the vertex's own chunk and of each chunk whose
 // triangles it is in. `sum` keeps a NaN that min/max would drop silently.
-// With `swept`, a vertex's previous position goes into the same boxes instead of a motion term.
+// With `swept`, a vertex's previous position goes into the same boxes instead of a motion term;
+// with `paths`, besides it.
 /// The refit's pass without the rest-shape bound.
 struct NoRestFit {
   void own(std::size_t /*v*/, Index /*c*/, const Vec3& /*x*/, const Vec3* /*displacement*/) {}
@@ -143,7 +144,7 @@ class RestFitPass {
 /// measures.
 template <typename T, typename Hook>
 void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev, std::size_t prev_stride,
-                 bool swept, std::vector<MotionBox>& boxes, double& sum, Hook& hook, T* copy) {
+                 bool swept, bool paths, std::vector<MotionBox>& boxes, double& sum, Hook& hook, T* copy) {
   const std::size_t n = ch.chunk_of.size();
   for (std::size_t v = 0; v < n; ++v) {
     // Positions usually live inside larger records (Bullet's nodes are 256 bytes): fetch ahead.
@@ -162,12 +163,14 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
     if (prev != nullptr) {
       const T* q = reinterpret_cast<const T*>(prev + v * prev_stride);
       const Vec3 qv{static_cast<double>(q[0]), static_cast<double>(q[1]), static_cast<double>(q[2])};
-      if (swept) {
-        s += qv.sum();
+      if (swept || paths) {
         q_lo = q_lo.cwiseMin(qv);
         q_hi = q_hi.cwiseMax(qv);
         box.lo = box.lo.cwiseMin(qv);
         box.hi = box.hi.cwiseMax(qv);
+      }
+      if (swept) {
+        s += qv.sum();
         hook.own(v, c, Vec3(x, y, z), nullptr);
       } else {
         const Vec3 d = Vec3(x, y, z) - qv;
@@ -516,7 +519,8 @@ void finishRestFit(Body& b) {
 
 }  // namespace
 
-void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
+void refitBounds(Body& b, bool measure, bool swept, bool rest_fit, bool paths) {
+  paths = paths && !swept;
   const ChunkLists& ch = b.chunks;
   b.chunk_box.assign(ch.count(), emptyBox());
   b.region_box.assign(b.regionCount(), emptyBox());
@@ -550,15 +554,15 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
     startRestFit(b);
     RestFitPass pass(*b.rest_fit, ch, b.rest);
     if (is_float)
-      streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, pass, cf);
+      streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, paths, b.chunk_box, sum, pass, cf);
     else
-      streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, pass, cd);
+      streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, paths, b.chunk_box, sum, pass, cd);
     pass.flush();
   } else {
     if (b.rest_fit) b.rest_fit->filled = false;
     NoRestFit none;
 #if defined(__SSE2__)
-    if (is_float && !swept) {
+    if (is_float && !swept && !paths) {
       if (ch.foreign.slotWidth() == 1)
         streamBoxesFloat<std::uint8_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum, cf);
       else if (ch.foreign.slotWidth() == 2)
@@ -568,9 +572,9 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
     } else
 #endif
     if (is_float)
-      streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, none, cf);
+      streamBoxes<float>(ch, base, stride, prev, prev_stride, swept, paths, b.chunk_box, sum, none, cf);
     else
-      streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, b.chunk_box, sum, none, cd);
+      streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, paths, b.chunk_box, sum, none, cd);
   }
   bool finite = std::isfinite(sum);
   for (MotionBox& box : b.chunk_box) {
@@ -578,7 +582,7 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
     // Finite but beyond kMaxCoordinate (a blown-up simulation) is rejected like NaN.
     finite = finite && box.lo.cwiseAbs().maxCoeff() <= kMaxCoordinate && box.hi.cwiseAbs().maxCoeff() <= kMaxCoordinate;
   }
-  if (!same_type && swept) {
+  if (!same_type && (swept || paths)) {
     for (std::size_t v = 0; v < ch.chunk_of.size(); ++v) {
       if (ch.chunk_of[v] == kInvalidIndex) continue;
       const Vec3 q = b.previous[static_cast<Index>(v)];
@@ -591,7 +595,8 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit) {
       ch.foreign.forEach(static_cast<Index>(v), add);
     }
     finite = finite && std::isfinite(sum);
-  } else if (!same_type) {
+  }
+  if (!same_type && !swept) {
     for (std::size_t c = 0; c < ch.count(); ++c)
       for (Index v : ch.vertices(static_cast<Index>(c)))
         b.chunk_box[c].motion = std::max(b.chunk_box[c].motion, b.vertexMotion(v));
@@ -736,6 +741,7 @@ struct VertexRec {
   double xn;  ///< projection on the sensor axis
   Index v;
   double reach2;  ///< MotionBound::Radius: squared distance below which a triangle is kept (reachOf)
+  double motion = 0.0;  ///< |x − previous| (PairContext::meeting)
 };
 
 /// What a probe tests against a triangle's box: the box [lo, hi] grown by r in every direction
@@ -769,6 +775,7 @@ struct TriangleCorners {
   Vec3 a, b, c;  ///< corners at the current positions (the distance test with MotionBound::Radius)
   Index t;
   Index k;  ///< its place in the chunk lists (ChunkLists::triangle)
+  double motion = 0.0;  ///< PairContext::meeting: the largest |corner − its previous position|
 };
 
 /// The gathered triangle records (gatherTriangles), as a structure of arrays parallel to
@@ -915,6 +922,9 @@ struct PairContext {
   std::vector<Index>* out_k = nullptr;
   /// vb == tb with the rest-shape bound on: this step's y-boxes, for dropUnbentPicks.
   const RestFit* rest_fit = nullptr;
+  /// CullParams::meeting (two-body pairs): the triangles' boxes hold their paths, and a pair is
+  /// also kept within margin_sum + |Δx_v| + the triangle's largest corner motion.
+  bool meeting = false;
 };
 
 /// SensorSettings::nearest_candidates keeps a vertex's candidates within this factor of its least
@@ -974,7 +984,7 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
     // (the same bound chunkCandidates puts on each probe), so neither do the picking and the
     // kept-triangle box.
     if (ctx.best2 != nullptr && ctx.ahead_steps == 0.0) r = std::min(r, nearestBand(ctx.best2[v]));
-    ctx.s.verts[at + k] = {x, r, xn, v, reach2};
+    ctx.s.verts[at + k] = {x, r, xn, v, reach2, ctx.meeting && moved ? (x - q).norm() : 0.0};
     lanes.x[at + k] = x.x();
     lanes.y[at + k] = x.y();
     lanes.z[at + k] = x.z();
@@ -990,22 +1000,24 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   const ChunkLists& ch = ctx.tb.chunks;
   const bool swept = ctx.swept && !ctx.tb.previous.empty();
   const bool ahead = ctx.ahead_steps > 0.0 && !ctx.tb.previous.empty();
+  const bool meeting = ctx.meeting && !ctx.tb.previous.empty();
+  const bool paths = swept || ahead || meeting;
   // Each vertex of the chunk's table read once (from the body's positions, usually Bullet's
   // 256-byte nodes), not once per triangle corner: about 45 reads for a chunk's 64 triangles
-  // instead of 192. With Swept or Ahead, the other end of each corner's path beside it.
+  // instead of 192. With Swept, Ahead or meeting pairs, the other end of each corner's path beside it.
   const Index* table = ch.table.data() + ch.table_begin[c.chunk];
   const std::size_t n_table = ch.table_begin[c.chunk + 1] - ch.table_begin[c.chunk];
   std::vector<Vec3>& at_now = ctx.s.table_now;
   std::vector<Vec3>& at_other = ctx.s.table_other;
   at_now.resize(n_table);
   for (std::size_t j = 0; j < n_table; ++j) at_now[j] = ctx.tb.positions[table[j]];
-  if (swept || ahead) {
+  if (paths) {
     at_other.resize(n_table);
     for (std::size_t j = 0; j < n_table; ++j) {
       const Vec3 q = ctx.tb.previous[table[j]];
-      // Swept: the triangle's swept volume lies in the box of its six positions (now and before).
-      // Ahead: the box of its corners now and ahead_steps steps ahead.
-      at_other[j] = swept ? q : Vec3(at_now[j] + ctx.ahead_steps * (at_now[j] - q));
+      // Swept and meeting pairs: the triangle's swept volume lies in the box of its six positions
+      // (now and before). Ahead: the box of its corners now and ahead_steps steps ahead.
+      at_other[j] = ahead ? Vec3(at_now[j] + ctx.ahead_steps * (at_now[j] - q)) : q;
     }
   }
   const std::size_t first = ch.triangle_begin[c.chunk];
@@ -1021,8 +1033,10 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
       rec.nlo = std::min(pa, std::min(pb, pc));
       rec.nhi = std::max(pa, std::max(pb, pc));
     }
-    if (swept || ahead) {
+    double corner_motion = 0.0;
+    if (paths) {
       for (const Index l : {la, lb, lc}) {
+        if (meeting) corner_motion = std::max(corner_motion, (at_now[l] - at_other[l]).norm());
         const Vec3& p = at_other[l];
         rec.lo = rec.lo.cwiseMin(p);
         rec.hi = rec.hi.cwiseMax(p);
@@ -1034,7 +1048,7 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
       }
     }
     ctx.s.tri_lanes.set(out + (at - first), rec);
-    ctx.s.corners[out + (at - first)] = {a, b, cc, ch.triangleId(c.chunk, at), static_cast<Index>(at)};
+    ctx.s.corners[out + (at - first)] = {a, b, cc, ch.triangleId(c.chunk, at), static_cast<Index>(at), corner_motion};
   }
   ctx.counters.candidate_triangles += ch.triangleCount(c.chunk);
 }
@@ -1306,8 +1320,11 @@ void keepWithinReach(const PairContext& ctx, const VertexRec* recs) {
   std::size_t not_nearest = 0;
   const auto decide = [&](std::size_t at, double d2) {
     const VertexRec& vr = recs[s.pending[at].first];
-    out[kept] = (std::uint64_t{vr.v} << 32) | s.corners[s.pending[at].second].t;
-    bool keep = d2 < vr.reach2;
+    const TriangleCorners& tc = s.corners[s.pending[at].second];
+    out[kept] = (std::uint64_t{vr.v} << 32) | tc.t;
+    // Meeting pairs: a pair that came within the margins during the step is now no farther apart
+    // than the margins plus the vertex's motion plus the motion of the triangle's point.
+    bool keep = d2 < (ctx.meeting ? std::max(vr.reach2, reachOf(vr.x, ctx.margin_sum + vr.motion + tc.motion)) : vr.reach2);
     if (out_d2 != nullptr) {
       out_d2[kept] = d2;
       if (out_k != nullptr) out_k[kept] = s.corners[s.pending[at].second].k;
@@ -2030,12 +2047,13 @@ class Collector {
     flagged_.push_back(f);
 
     const auto t0 = std::chrono::steady_clock::now();
-    const PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab.keys, counters_, s_,
-                           -1.0, nullptr, ahead_steps, params_.nearest ? &ab.d2 : nullptr,
-                           params_.nearest ? least_.data() : nullptr, seeded ? &ab.k : nullptr};
-    const PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba.keys, counters_, s_,
-                           -1.0, nullptr, ahead_steps, params_.nearest ? &ba.d2 : nullptr,
-                           params_.nearest ? least_b_.data() : nullptr, seeded ? &ba.k : nullptr};
+    PairContext to_b{A, B, A.margin + B.margin, B.margin, mf, params_.swept, axis, ab.keys, counters_, s_,
+                     -1.0, nullptr, ahead_steps, params_.nearest ? &ab.d2 : nullptr,
+                     params_.nearest ? least_.data() : nullptr, seeded ? &ab.k : nullptr};
+    PairContext to_a{B, A, A.margin + B.margin, A.margin, mf, params_.swept, axis, ba.keys, counters_, s_,
+                     -1.0, nullptr, ahead_steps, params_.nearest ? &ba.d2 : nullptr,
+                     params_.nearest ? least_b_.data() : nullptr, seeded ? &ba.k : nullptr};
+    to_b.meeting = to_a.meeting = params_.meeting && ahead_steps == 0.0;
     const int ax = longestAxis(boxI.lo.cwiseMax(boxJ.lo), boxI.hi.cwiseMin(boxJ.hi));
     s_.items_a.clear();
     s_.items_b.clear();

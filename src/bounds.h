@@ -24,8 +24,10 @@ namespace psc::detail {
 /// With `measure`, also fills b.shape (region areas and the longest edge) in the same pass.
 /// `swept` (MotionBound::Swept): the boxes hold the previous positions too and no motion term.
 /// With `rest_fit` (a self-colliding body, MotionBound::Radius), the same pass fills b.rest_fit,
-/// the rest-shape bound of the self-collision cull.
-void refitBounds(Body& b, bool measure, bool swept, bool rest_fit = false);
+/// the rest-shape bound of the self-collision cull. `paths` (MotionBound::Radius with
+/// SensorSettings::meeting_pairs): the boxes hold the previous positions too, as with `swept`, and
+/// the motion term is kept.
+void refitBounds(Body& b, bool measure, bool swept, bool rest_fit = false, bool paths = false);
 
 /// SensorSettings::nearest_candidates: each vertex's nearest triangles of the last step, per
 /// ordered body pair. The next step's candidate stage starts each such vertex's search from its
@@ -55,6 +57,9 @@ struct NearestSeeds {
 struct CullParams {
   double motion_factor = 2.0;  ///< MotionBound::Radius; 0 with `swept`
   bool swept = false;          ///< MotionBound::Swept
+  /// SensorSettings::meeting_pairs with MotionBound::Radius: two-body pairs also kept when they
+  /// can have met within the margins during the step (the boxes hold both positions).
+  bool meeting = false;
   double ahead_steps = 0.0;    ///< MotionBound::Ahead: SensorSettings::ahead_steps (two-body probes
                                ///< against the paths ahead); 0 = not Ahead
   bool use_sensors = true;     ///< false: Flagging::Bounds (the ablation)

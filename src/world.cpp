@@ -100,6 +100,10 @@ struct SensorWorld::Impl {
   bool restFitOn(const Body& b) const {
     return b.selfCollides() && settings.motion_bound != MotionBound::Swept && settings.flagging != Flagging::Sensors;
   }
+  /// SensorSettings::meeting_pairs in effect: with MotionBound::Radius in the default midphase.
+  bool meetingPairs() const {
+    return settings.meeting_pairs && settings.motion_bound == MotionBound::Radius && settings.flagging != Flagging::Sensors;
+  }
   void moveParticles(StepStats& stats, double r_eff);
   const std::vector<Index>& ringOf(std::size_t particle, const Body& b, Index region, Index v);
 };
@@ -118,7 +122,7 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
                                  settings.chunk_vertices);
   b.rest_fit.reset();
   // The repartition check compares with what the same refit measures now (A* and the longest edge).
-  detail::refitBounds(b, true, settings.motion_bound == MotionBound::Swept, restFitOn(b));
+  detail::refitBounds(b, true, settings.motion_bound == MotionBound::Swept, restFitOn(b), meetingPairs());
   b.max_edge = b.shape.max_edge;
   const std::vector<double> areas =
       settings.repartition.estimator == AreaEstimator::TrueArea
@@ -168,7 +172,7 @@ void SensorWorld::Impl::refitAndCheck(Body& b, StepStats& stats) {
   const bool check = rs.enabled && b.deformable && ++b.steps_since_check >= rs.check_every;
   // The check's area and edge figures come out of the refit's pass over the vertices.
   auto t = Clock::now();
-  detail::refitBounds(b, check, settings.motion_bound == MotionBound::Swept, restFitOn(b));
+  detail::refitBounds(b, check, settings.motion_bound == MotionBound::Swept, restFitOn(b), meetingPairs());
   stats.ms_refit += msSince(t);
   if (!check) return;
   t = Clock::now();
@@ -527,6 +531,7 @@ const StepResult& SensorWorld::step() {
   for (auto& kv : w.bodies) ordered.push_back(kv.second.get());
   detail::CullParams params;
   params.swept = w.settings.motion_bound == MotionBound::Swept;
+  params.meeting = w.meetingPairs();
   params.motion_factor = params.swept ? 0.0 : w.settings.motion_factor;
   params.ahead_steps = w.settings.motion_bound == MotionBound::Ahead ? w.settings.ahead_steps : 0.0;
   params.use_sensors = w.settings.flagging == Flagging::SensorsAndBounds;

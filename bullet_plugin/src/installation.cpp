@@ -68,13 +68,16 @@ std::pair<const psc::CandidatePair*, const psc::CandidatePair*> candidatesOf(
   return {base + (first - candidates.begin()), base + (last - candidates.begin())};
 }
 
-/// The core's settings for this plugin. Robust with ContactSet::NearestFace needs only each node's nearest faces: Robust accepts every pair within
+/// The core's settings for this plugin. Continuous's crossing test needs, besides Bullet's radius,
+/// every pair that meets during the step: with the radius bound it asks the core for both
+/// (SensorSettings::meeting_pairs). Robust with ContactSet::NearestFace needs only each node's nearest faces: Robust accepts every pair within
 /// the radius, so the nearest accepted contact is among them (SensorSettings::nearest_candidates).
 /// Bullet's test refuses small faces, where a farther face could give the node its contact: it
 /// gets every candidate.
 psc::SensorSettings coreSettings(const Settings& settings) {
   psc::SensorSettings core = settings.sensors;
   if (settings.contacts == ContactSet::NearestFace && settings.exact == ExactTest::Robust) core.nearest_candidates = true;
+  if (settings.exact == ExactTest::Continuous) core.meeting_pairs = true;
   return core;
 }
 

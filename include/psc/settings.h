@@ -134,6 +134,17 @@ struct SensorSettings {
   /// pairs measured and left out (candidates_not_nearest). MotionBound::Swept has no such distance, and the thesis's
   /// flag-only mode (Flagging::Sensors) no such filter: both ignore it.
   bool nearest_candidates = false;
+  /// [beyond] With MotionBound::Radius: also every two-body pair that comes within margin_A +
+  /// margin_B at some time of the step, vertex and triangle both moving linearly, as
+  /// MotionBound::Swept keeps them: the union of the two bounds, for a continuous test that also
+  /// wants Bullet's radius (psc::bullet's ExactTest::Continuous sets it). The boxes then hold both
+  /// positions of every vertex besides the motion term, and a pair is kept when its distance now
+  /// is below the vertex's radius or below margin_A + margin_B + |Δx_v| + the largest motion of the
+  /// triangle's corners (a pair that met during the step is no farther apart now). It reaches a
+  /// slow vertex that a fast triangle sweeps over, which Radius alone, whose reach grows with the
+  /// vertex's own motion, leaves out. Self pairs keep the self rule's radius. Ignored with Swept,
+  /// Ahead and the thesis's flag-only mode.
+  bool meeting_pairs = false;
 
   PartitionSettings partition;
   DecompositionSettings decomposition;
