@@ -38,14 +38,14 @@ enum class ExactTest {
   /// against the same body keep their weights but take their face's normal towards the side the
   /// node started on, so the faces next to the crossed one (a dent under an impact) hold it too
   /// (exact.h). runaway_sharing and crowded_band apply to its discrete contacts as to Robust's.
-  /// Its candidates are those of `sensors.motion_bound`: with Radius (the default) every pair
-  /// within Bullet's radius, so it makes every contact Robust makes, and the crossing test runs on
-  /// those pairs; with Swept the pairs that meet during the step (within the margins along both
-  /// paths), so it also tests a slow node that a fast face sweeps over, but makes no contact for a
-  /// pair within Bullet's radius that does not meet. Swept was the only choice until 2026-11-26,
-  /// with the margins alone as the discrete radius; on the fast scenes the radius bound and Bullet's
-  /// radius left no edge–triangle crossing and no tunnelled vertex at 300 to 2,000 vertices, where
-  /// that had both (docs/DECISIONS.md, "Continuous keeps Bullet's radius").
+  /// With `sensors.motion_bound` = Radius (the default) the plugin asks the core for every pair
+  /// within Bullet's radius and every pair that meets within the margins during the step
+  /// (psc::SensorSettings::meeting_pairs), so it makes every contact Robust makes and its crossing
+  /// test sees every pair that can cross; with Swept only the pairs that meet, so a pair within
+  /// Bullet's radius that does not meet gets no contact. Swept, with the margins alone as the
+  /// discrete radius, was the only choice until 2026-11-26; on the fast scenes Bullet's radius left
+  /// no edge–triangle crossing and no tunnelled vertex at 300 to 2,000 vertices, where that had
+  /// both (docs/DECISIONS.md, "Continuous keeps Bullet's radius").
   Continuous,
 };
 
