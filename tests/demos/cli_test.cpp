@@ -347,7 +347,17 @@ TEST(DemoCli, PipelineAndFlaggingChoices) {
   EXPECT_TRUE(no_sensors.exited);
   EXPECT_EQ(no_sensors.code, 2) << no_sensors.output;
   EXPECT_NE(no_sensors.output.find("has no sensors run"), std::string::npos) << no_sensors.output;
-  for (const char* bad : {"--pipeline sensor", "--pipeline boxes", "--flagging bounds"}) {
+  // The motion bounds: swept for the continuous test reaches the JSON; the thesis's mode has no
+  // swept bound, which the core names.
+  const Outcome swept = run(scene + "--pipeline sensors --exact continuous --motion-bound swept --json " +
+                            (dir / "swept.json").string());
+  ASSERT_TRUE(swept.exited && swept.code == 0) << swept.output;
+  EXPECT_EQ(readJson(dir / "swept.json")["runs"][0].at("motion_bound"), "swept");
+  const Outcome thesis_swept = run(scene + "--pipeline sensors --flagging thesis --motion-bound swept");
+  EXPECT_TRUE(thesis_swept.exited);
+  EXPECT_NE(thesis_swept.code, 0) << thesis_swept.output;
+  EXPECT_NE(thesis_swept.output.find("Swept"), std::string::npos) << thesis_swept.output;
+  for (const char* bad : {"--pipeline sensor", "--pipeline boxes", "--flagging bounds", "--motion-bound sweep"}) {
     const Outcome o = run(std::string("--scene head_on --steps 1 ") + bad);
     EXPECT_TRUE(o.exited) << bad;
     EXPECT_NE(o.code, 0) << bad << "\n" << o.output;
