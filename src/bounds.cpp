@@ -979,7 +979,10 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
     // (R + 2·|Δx|, at least as far): no rounding slack, or the exact stage would make contacts
     // beyond the rule (seen in the double build, where the truth's rounding band is too narrow to
     // hide them).
-    const double reach2 = swept ? 0.0 : self_motion ? r * r : reachOf(x, r);
+    const double reach2 = swept ? 0.0 : ctx.self_exclude2 >= 0.0 ? r * r : reachOf(x, r);
+    // Meeting pairs: the vertex's probes reach at least its own path (margins + |Δx|), whatever
+    // motion_factor the radius bound has.
+    if (ctx.meeting && moved) r = std::max(r, ctx.margin_sum + (x - q).norm());
     // nearest_candidates: the probes need not reach past the band of the vertex's nearest so far
     // (the same bound chunkCandidates puts on each probe), so neither do the picking and the
     // kept-triangle box.
@@ -1826,7 +1829,10 @@ class Collector {
     // and region by the refit (RestFit); with the swept bound, the boxes hold the paths.
     static const RestFit kNone;
     const RestFit& fit = X.rest_fit ? *X.rest_fit : kNone;
-    const bool self_motion = fit.filled && !params_.swept;
+    // Meeting pairs (the radius bound and the swept one together): a body's pairs with itself are
+    // the swept bound's, the pairs that meet within the self radius during the step.
+    const bool swept_self = params_.swept || params_.meeting;
+    const bool self_motion = fit.filled && !swept_self;
     const auto regionBox = [&](Index r) {
       MotionBox box = X.region_box[r];
       if (self_motion) box.motion = fit.region_self_motion[r];
@@ -1858,7 +1864,7 @@ class Collector {
       least_.resize(X.chunks.chunk_of.size(), std::numeric_limits<double>::infinity());
     // The rest-shape bound needs the radius bound's reach (a swept pair may meet during the step).
     const bool rest_bound = params_.self_rest_bound && self_motion;
-    PairContext ctx{X,         X,  radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude,
+    PairContext ctx{X,         X,  radius, half, mf, swept_self, no_axis, g.keys, counters_, s_, exclude * exclude,
                     self_motion ? &fit.mean_motion : nullptr, 0.0, params_.nearest ? &g.d2 : nullptr,
                     params_.nearest ? least_.data() : nullptr};
     if (rest_bound) ctx.rest_fit = &fit;
@@ -2119,9 +2125,11 @@ class Collector {
     if (!balls.made[cv]) {
       Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
       const bool moved = !V.previous.empty();
+      // Meeting pairs: a vertex's probes reach at least its own path (gatherVertices).
+      const double factor = params_.meeting ? std::max(params_.motion_factor, 1.0) : params_.motion_factor;
       for (const Index v : V.chunks.vertices(cv)) {
         const Vec3 x = V.positions[v];
-        const double m = moved ? params_.motion_factor * (x - V.previous[v]).norm() : 0.0;
+        const double m = moved ? factor * (x - V.previous[v]).norm() : 0.0;
         lo = lo.cwiseMin(Vec3(x.array() - m));
         hi = hi.cwiseMax(Vec3(x.array() + m));
       }

@@ -98,7 +98,8 @@ struct SensorWorld::Impl {
   /// Whether the refit carries b's self-collision part (the rest-shape bound and the self motion
   /// term): what the self-collision cull reads with MotionBound::Radius in the default midphase.
   bool restFitOn(const Body& b) const {
-    return b.selfCollides() && settings.motion_bound != MotionBound::Swept && settings.flagging != Flagging::Sensors;
+    return b.selfCollides() && settings.motion_bound != MotionBound::Swept && settings.flagging != Flagging::Sensors &&
+           !meetingPairs();
   }
   /// SensorSettings::meeting_pairs in effect: with MotionBound::Radius in the default midphase.
   bool meetingPairs() const {
@@ -538,7 +539,7 @@ const StepResult& SensorWorld::step() {
   params.self_rest_exclusion = w.settings.self_rest_exclusion;
   params.self_radius_edges = w.settings.self_radius_edges;
   params.self_rest_bound = w.settings.self_rest_bound;
-  params.nearest = w.settings.nearest_candidates && !params.swept;
+  params.nearest = w.settings.nearest_candidates && !params.swept && !params.meeting;
   if (params.nearest) params.seeds = &w.nearest_seeds;
   // [beyond] In the default mode a particle only serves the sensor decision of its region's pairs,
   // which exist only where the region's box reaches another body's: the other particles stay put

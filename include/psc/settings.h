@@ -142,8 +142,12 @@ struct SensorSettings {
   /// is below the vertex's radius or below margin_A + margin_B + |Δx_v| + the largest motion of the
   /// triangle's corners (a pair that met during the step is no farther apart now). It reaches a
   /// slow vertex that a fast triangle sweeps over, which Radius alone, whose reach grows with the
-  /// vertex's own motion, leaves out. Self pairs keep the self rule's radius. Ignored with Swept,
-  /// Ahead and the thesis's flag-only mode.
+  /// vertex's own motion, leaves out. A vertex's probes reach at least its own path (margins +
+  /// |Δx_v|) whatever motion_factor is. A body's pairs with itself are then the swept bound's (the
+  /// pairs that meet within the self radius during the step; the rest-shape bound is off).
+  /// nearest_candidates is off with it (a crossing test needs every pair, not each vertex's
+  /// nearest). Ignored with Swept, Ahead, a pair on SensorWorld::setPairAhead, and the thesis's
+  /// flag-only mode.
   bool meeting_pairs = false;
 
   PartitionSettings partition;

@@ -723,57 +723,64 @@ TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
 // during the step but not within the radius bound's reach now, whose motion term is the sheet
 // vertex's own.
 TEST(HardConditions, MeetingPairsJoinTheRadiusBoundAndTheSweptOne) {
-  FlyingBall fly(5, 0.004, 0.0, Vec3(-2.5, -1.0, 1.2), Vec3(0.9, 0.5, -0.35));
-  std::vector<Body>& bodies = fly.bodies;
-  SensorSettings settings;
-  settings.meeting_pairs = true;
-  SensorWorld meeting(settings), radius;
-  addAll(meeting, bodies);
-  for (Body& b : bodies) b.id = radius.addBody(descOf(b));
-  using Key = std::tuple<BodyId, Index, BodyId, Index>;
-  std::size_t met = 0, met_beyond_radius = 0, in_radius = 0, candidates = 0;
-  for (int step = 1; step <= 6; ++step) {
-    fly.moveTo(step, {&meeting, &radius});
-    std::set<Key> got, got_radius;
-    for (const CandidatePair& c : meeting.step().candidates) got.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
-    for (const CandidatePair& c : radius.step().candidates) got_radius.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
-    candidates += got.size();
-    in_radius += got_radius.size();
-    for (const Key& k : got_radius) EXPECT_EQ(got.count(k), 1u) << "step " << step << ": a pair of the radius bound is missing";
-    const double r = bodies[0].margin + bodies[1].margin;
-    for (int i = 0; i < 2; ++i) {
-      const Body &a = bodies[i], &b = bodies[1 - i];
-      for (Index v = 0; v < a.mesh.vertices.size(); ++v) {
-        const double dv = (a.mesh.vertices[v] - a.previous[v]).norm();
-        for (Index t = 0; t < b.mesh.triangles.size(); ++t) {
-          const Triangle& tri = b.mesh.triangles[t];
-          const Key key{a.id, v, b.id, t};
-          double dt = 0.0;
-          for (Index c : tri) dt = std::max(dt, (b.mesh.vertices[c] - b.previous[c]).norm());
-          const double now = testkit::pointTriangleDistance(a.mesh.vertices[v], b.mesh.vertices[tri[0]],
-                                                            b.mesh.vertices[tri[1]], b.mesh.vertices[tri[2]]);
-          if (got.count(key) != 0) {
-            EXPECT_LT(now, std::max(r + 2.0 * dv, r + dv + dt) * (1.0 + 1e-4) + 1e-5) << "step " << step << ": a pair beyond both reaches";
+  // motion_factor 0.5 too: the probes must still reach each vertex's own path.
+  for (const double factor : {2.0, 0.5}) {
+    FlyingBall fly(5, 0.004, 0.0, Vec3(-2.5, -1.0, 1.2), Vec3(0.9, 0.5, -0.35));
+    std::vector<Body>& bodies = fly.bodies;
+    SensorSettings plain;
+    plain.motion_factor = factor;
+    SensorSettings settings = plain;
+    settings.meeting_pairs = true;
+    SensorWorld meeting(settings), radius(plain);
+    addAll(meeting, bodies);
+    for (Body& b : bodies) b.id = radius.addBody(descOf(b));
+    using Key = std::tuple<BodyId, Index, BodyId, Index>;
+    std::size_t met = 0, met_beyond_radius = 0, in_radius = 0, candidates = 0;
+    for (int step = 1; step <= 6; ++step) {
+      fly.moveTo(step, {&meeting, &radius});
+      std::set<Key> got, got_radius;
+      for (const CandidatePair& c : meeting.step().candidates) got.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+      for (const CandidatePair& c : radius.step().candidates)
+        got_radius.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+      candidates += got.size();
+      in_radius += got_radius.size();
+      for (const Key& k : got_radius) EXPECT_EQ(got.count(k), 1u) << "step " << step << ": a pair of the radius bound is missing";
+      const double r = bodies[0].margin + bodies[1].margin;
+      for (int i = 0; i < 2; ++i) {
+        const Body &a = bodies[i], &b = bodies[1 - i];
+        for (Index v = 0; v < a.mesh.vertices.size(); ++v) {
+          const double dv = (a.mesh.vertices[v] - a.previous[v]).norm();
+          for (Index t = 0; t < b.mesh.triangles.size(); ++t) {
+            const Triangle& tri = b.mesh.triangles[t];
+            const Key key{a.id, v, b.id, t};
+            double dt = 0.0;
+            for (Index c : tri) dt = std::max(dt, (b.mesh.vertices[c] - b.previous[c]).norm());
+            const double now = testkit::pointTriangleDistance(a.mesh.vertices[v], b.mesh.vertices[tri[0]],
+                                                              b.mesh.vertices[tri[1]], b.mesh.vertices[tri[2]]);
+            if (got.count(key) != 0) {
+              EXPECT_LT(now, std::max(r + factor * dv, r + dv + dt) * (1.0 + 1e-4) + 1e-5)
+                  << "step " << step << ": a pair beyond both reaches";
+            }
+            bool meets = false;
+            for (int k = 0; k <= 64 && !meets; ++k) {
+              const double s = k / 64.0;
+              const auto at = [&](const Body& x, Index u) { return Vec3((1 - s) * x.previous[u] + s * x.mesh.vertices[u]); };
+              meets = testkit::pointTriangleDistance(at(a, v), at(b, tri[0]), at(b, tri[1]), at(b, tri[2])) < r;
+            }
+            if (!meets) continue;
+            ++met;
+            met_beyond_radius += got_radius.count(key) == 0;
+            EXPECT_EQ(got.count(key), 1u) << "motion_factor " << factor << ", step " << step << ": " << a.name
+                                          << " vertex " << v << " meets " << b.name << " triangle " << t;
           }
-          bool meets = false;
-          for (int k = 0; k <= 64 && !meets; ++k) {
-            const double s = k / 64.0;
-            const auto at = [&](const Body& x, Index u) { return Vec3((1 - s) * x.previous[u] + s * x.mesh.vertices[u]); };
-            meets = testkit::pointTriangleDistance(at(a, v), at(b, tri[0]), at(b, tri[1]), at(b, tri[2])) < r;
-          }
-          if (!meets) continue;
-          ++met;
-          met_beyond_radius += got_radius.count(key) == 0;
-          EXPECT_EQ(got.count(key), 1u) << "step " << step << ": " << a.name << " vertex " << v << " meets " << b.name
-                                        << " triangle " << t;
         }
       }
     }
+    std::printf("meeting pairs, motion_factor %.1f: %zu met during the steps, %zu of them beyond the radius bound; "
+                "candidates %zu (radius bound %zu)\n", factor, met, met_beyond_radius, candidates, in_radius);
+    EXPECT_GT(met, 50u) << "the ball must cross the sheet";
+    EXPECT_GT(met_beyond_radius, 10u) << "the radius bound alone must miss some: else the test shows nothing";
   }
-  std::printf("meeting pairs: %zu met during the steps, %zu of them beyond the radius bound; candidates %zu (radius "
-              "bound %zu)\n", met, met_beyond_radius, candidates, in_radius);
-  EXPECT_GT(met, 50u) << "the ball must cross the sheet";
-  EXPECT_GT(met_beyond_radius, 10u) << "the radius bound alone must miss some: else the test shows nothing";
 }
 
 TEST(HardConditions, AheadBoundKeepsTheMarginsAndWhatTheMotionHeadsInto) {

@@ -40,9 +40,12 @@ enum class ExactTest {
   /// (exact.h). runaway_sharing and crowded_band apply to its discrete contacts as to Robust's.
   /// With `sensors.motion_bound` = Radius (the default) the plugin asks the core for every pair
   /// within Bullet's radius and every pair that meets within the margins during the step
-  /// (psc::SensorSettings::meeting_pairs), so it makes every contact Robust makes and its crossing
-  /// test sees every pair that can cross; with Swept only the pairs that meet, so a pair within
-  /// Bullet's radius that does not meet gets no contact. Swept, with the margins alone as the
+  /// (psc::SensorSettings::meeting_pairs), so between two bodies it makes every contact Robust
+  /// makes and its crossing test sees every pair that can cross; a body's pairs with itself
+  /// (self-collision) are the pairs that meet within its self radius during the step. With Swept
+  /// only the pairs that meet, so a pair within Bullet's radius that does not meet gets no
+  /// contact. With the thesis's flag-only mode (sensors.flagging = Sensors) it tests the thesis's
+  /// candidate sets, which hold neither guarantee. Swept, with the margins alone as the
   /// discrete radius, was the only choice until 2026-11-26; on the fast scenes Bullet's radius left
   /// no edge–triangle crossing and no tunnelled vertex at 300 to 2,000 vertices, where that had
   /// both (docs/DECISIONS.md, "Continuous keeps Bullet's radius").
