@@ -1829,9 +1829,10 @@ class Collector {
     // and region by the refit (RestFit); with the swept bound, the boxes hold the paths.
     static const RestFit kNone;
     const RestFit& fit = X.rest_fit ? *X.rest_fit : kNone;
-    // Meeting pairs (the radius bound and the swept one together): a body's pairs with itself are
-    // the swept bound's, the pairs that meet within the self radius during the step.
-    const bool swept_self = params_.swept || params_.meeting;
+    // With meeting pairs a body's pairs with itself keep the self rule's radius: its exact stage
+    // decides at Bullet's radius, wider than the rule's, and would make contacts of every pair the
+    // swept bound's boxes keep (a fast body: millions beyond the rule).
+    const bool swept_self = params_.swept;
     const bool self_motion = fit.filled && !swept_self;
     const auto regionBox = [&](Index r) {
       MotionBox box = X.region_box[r];

@@ -98,8 +98,7 @@ struct SensorWorld::Impl {
   /// Whether the refit carries b's self-collision part (the rest-shape bound and the self motion
   /// term): what the self-collision cull reads with MotionBound::Radius in the default midphase.
   bool restFitOn(const Body& b) const {
-    return b.selfCollides() && settings.motion_bound != MotionBound::Swept && settings.flagging != Flagging::Sensors &&
-           !meetingPairs();
+    return b.selfCollides() && settings.motion_bound != MotionBound::Swept && settings.flagging != Flagging::Sensors;
   }
   /// SensorSettings::meeting_pairs in effect: with MotionBound::Radius in the default midphase.
   bool meetingPairs() const {

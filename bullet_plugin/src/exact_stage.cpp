@@ -63,7 +63,15 @@ inline void bulletProjectOrigin(const btVector3& a, const btVector3& b, const bt
 struct PairContext {
   const btSoftBody* psb[2];  // node's body, face's body
   btScalar mrg;              // contact radius without motion: the margins' sum, or the self contact radius
+  // Bullet's motion term, 2·|m_x − m_q|, in the discrete radius. Not for Continuous on a body
+  // against itself: there a body's speed is no reason to touch itself (the core's self rule has its
+  // own motion term), and Continuous's crossing test stands in for it (motionTermFor).
+  bool motion_term = true;
 };
+
+bool motionTermFor(ExactTest test, const btSoftBody& node_body, const btSoftBody& face_body) {
+  return !(test == ExactTest::Continuous && &node_body == &face_body);
+}
 
 /// The fields CollideVF_SS fills after its distance test, for weights w and normal `normal`.
 /// False (no contact) when neither side can move, as in Bullet.
@@ -142,7 +150,7 @@ ContactKind robustContact(const PairContext& ctx, const btSoftBody::Node& node, 
                           btScalar m, btSoftBody::SContact& contact);
 
 /// Bullet's CollideVF_SS decision and contact (Robust = false), or Robust's (true): both at
-/// Bullet's radius, margins + 2·|m_x − m_q|.
+/// Bullet's radius, margins + 2·|m_x − m_q| (without ctx.motion_term, the margins alone).
 ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::Node& node,
                          const btSoftBody::Face& face, btSoftBody::SContact& contact) {
   const btVector3 o = node.m_x;
@@ -150,7 +158,7 @@ ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::
   btScalar d = SIMD_INFINITY;
   bool skipped = false;
   bulletProjectOrigin(face.m_n[0]->m_x - o, face.m_n[1]->m_x - o, face.m_n[2]->m_x - o, p, d, skipped);
-  const btScalar m = ctx.mrg + (o - node.m_q).length() * 2;
+  const btScalar m = ctx.motion_term ? ctx.mrg + (o - node.m_q).length() * 2 : ctx.mrg;
   if (d < (m * m)) {
     if (!robust || d > 0) {
       const btSoftBody::Node* n[] = {face.m_n[0], face.m_n[1], face.m_n[2]};
@@ -264,7 +272,8 @@ ExactTest exactTestFromString(const std::string& text) {
 
 ContactKind exactContact(ExactTest test, const btSoftBody& node_body, const btSoftBody::Node& node,
                          const btSoftBody& face_body, const btSoftBody::Face& face, btSoftBody::SContact& contact) {
-  const PairContext ctx = contextOf(node_body, face_body);
+  PairContext ctx = contextOf(node_body, face_body);
+  ctx.motion_term = motionTermFor(test, node_body, face_body);
   switch (test) {
     case ExactTest::Bullet: return discreteTest(false, ctx, node, face, contact);
     case ExactTest::Robust: return discreteTest(true, ctx, node, face, contact);
@@ -397,7 +406,7 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
       in.bx[l] = nb.m_x.x(), in.by[l] = nb.m_x.y(), in.bz[l] = nb.m_x.z(), in.ib[l] = nb.m_im;
       in.cx[l] = nc.m_x.x(), in.cy[l] = nc.m_x.y(), in.cz[l] = nc.m_x.z(), in.ic[l] = nc.m_im;
     }
-    d::vfLanes(in, ctx.mrg, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, robust, out);
+    d::vfLanes(in, ctx.mrg, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, robust, ctx.motion_term, out);
     if ((out.contact | out.scalar | out.robust) == 0 && !continuous) continue;
     for (int l = 0; l < d::kVfLanes; ++l) {
       const std::uint32_t bit = 1u << l;
@@ -476,7 +485,7 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
     counts.contacts = static_cast<std::size_t>(node_body.m_scontacts.size() - before);
     return counts;
   }
-  const PairContext ctx{{&node_body, &face_body}, radius};
+  const PairContext ctx{{&node_body, &face_body}, radius, motionTermFor(test, node_body, face_body)};
   std::vector<const btSoftBody::Node*> crossed;  // nodes with a crossing contact in this call
   std::vector<char> is_crossing;                 // per contact pushed in this call
   const auto take = [&](const btSoftBody::Node& node, ContactKind kind, const btSoftBody::SContact& contact) {

@@ -71,7 +71,7 @@ PSC_AVX void projectEdge(const V3& a, const V3& b, __m256 active, V3& prj, __m25
 }
 
 [[gnu::target("avx")]] void lanesAvx(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust,
-                                     VfLanesOut& out) {
+                                     bool motion_term, VfLanesOut& out) {
   const __m256 zero = _mm256_setzero_ps();
   const __m256 one = _mm256_set1_ps(1.0f);
   const __m256 flt_max = _mm256_set1_ps(FLT_MAX);  // SIMD_INFINITY
@@ -104,9 +104,10 @@ PSC_AVX void projectEdge(const V3& a, const V3& b, __m256 active, V3& prj, __m25
   // Every value ProjectOrigin assigns to d is below SIMD_INFINITY: d < FLT_MAX <=> p was set.
   const __m256 set = lt(d, flt_max);
 
-  // m = mrg + (o − m_q).length() * 2; the pair is accepted when d < m·m.
+  // m = mrg + (o − m_q).length() * 2 (or mrg alone); the pair is accepted when d < m·m.
   const V3 motion = sub(o, load(in.qx, in.qy, in.qz));
-  const __m256 m = add(_mm256_set1_ps(mrg), mul(_mm256_sqrt_ps(dot(motion, motion)), _mm256_set1_ps(2.0f)));
+  const __m256 m = motion_term ? add(_mm256_set1_ps(mrg), mul(_mm256_sqrt_ps(dot(motion, motion)), _mm256_set1_ps(2.0f)))
+                               : _mm256_set1_ps(mrg);
   const __m256 accept = lt(d, mul(m, m));
 
   // BaryCoord(A, B, C, p + o).
@@ -168,11 +169,11 @@ bool vfLanesEnabled() {
 
 void allowVfLanes(bool allowed) { g_allowed.store(allowed, std::memory_order_relaxed); }
 
-void vfLanes(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust, VfLanesOut& out) {
+void vfLanes(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust, bool motion_term, VfLanesOut& out) {
 #if defined(PSC_HAVE_VF_LANES)
-  lanesAvx(in, mrg, kshr0, kshr1, robust, out);
+  lanesAvx(in, mrg, kshr0, kshr1, robust, motion_term, out);
 #else
-  (void)in, (void)mrg, (void)kshr0, (void)kshr1, (void)robust;
+  (void)in, (void)mrg, (void)kshr0, (void)kshr1, (void)robust, (void)motion_term;
   out.contact = out.robust = 0;
   out.scalar = ~0u;  // never reached: vfLanesEnabled() is false
 #endif

@@ -54,7 +54,8 @@ void allowVfLanes(bool allowed);
 
 /// Runs the eight lanes. `mrg`: the contact radius without motion (CollideVF_SS::mrg); `kshr0` /
 /// `kshr1`: m_cfg.kSHR of the node's and the face's body. `robust`: also flag Robust's lanes in
-/// `scalar`. The radius is Bullet's, mrg + 2·|m_x − m_q|. Only call when vfLanesEnabled().
-void vfLanes(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust, VfLanesOut& out);
+/// `scalar`. The radius is Bullet's, mrg + 2·|m_x − m_q|; without `motion_term` mrg alone
+/// (Continuous on a body against itself). Only call when vfLanesEnabled().
+void vfLanes(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust, bool motion_term, VfLanesOut& out);
 
 }  // namespace psc::bullet::detail

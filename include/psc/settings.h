@@ -143,8 +143,7 @@ struct SensorSettings {
   /// triangle's corners (a pair that met during the step is no farther apart now). It reaches a
   /// slow vertex that a fast triangle sweeps over, which Radius alone, whose reach grows with the
   /// vertex's own motion, leaves out. A vertex's probes reach at least its own path (margins +
-  /// |Δx_v|) whatever motion_factor is. A body's pairs with itself are then the swept bound's (the
-  /// pairs that meet within the self radius during the step; the rest-shape bound is off).
+  /// |Δx_v|) whatever motion_factor is. A body's pairs with itself keep the self rule's radius.
   /// nearest_candidates is off with it (a crossing test needs every pair, not each vertex's
   /// nearest). Ignored with Swept, Ahead, a pair on SensorWorld::setPairAhead, and the thesis's
   /// flag-only mode.

@@ -256,13 +256,11 @@ TEST(SelfCollision, NoSelfCandidateLiesBeyondTheSelfRadiusNotEvenByARoundingSlac
   EXPECT_TRUE(got.empty()) << got.size() << " self candidates beyond the self radius";
 }
 
-TEST(SelfCollision, WithMeetingPairsABodysPairsAreThoseThatMeetDuringTheStep) {
-  // A folded cloth whose top layer comes down 0.4 this step, through the bottom one, which stays
-  // put. With SensorSettings::meeting_pairs (psc::bullet's Continuous) a body's pairs with itself
-  // are the swept bound's: every pair that comes within the self radius during the step (the
-  // distance at 65 times, by brute force) is a candidate, the bottom layer's resting vertices
-  // against the top layer's moving triangles included, which the self rule's radius misses (its
-  // motion term is the resting vertex's own).
+TEST(SelfCollision, MeetingPairsLeaveABodysPairsWithItselfAsTheSelfRuleHasThem) {
+  // SensorSettings::meeting_pairs is for two bodies: a body's pairs with itself stay the self
+  // rule's (within R + 2·selfMotion), whose exact stage would otherwise make contacts of pairs the
+  // rule leaves out. A folded cloth whose top layer comes down 0.4 this step, through the bottom
+  // one: the same self candidates with and without it.
   TriMesh cloth = makePatch(2.0, 1.0, 41, 21);
   const std::vector<Vec3> rest = cloth.vertices;
   SensorSettings settings;
@@ -282,25 +280,8 @@ TEST(SelfCollision, WithMeetingPairsABodysPairsAreThoseThatMeetDuringTheStep) {
   std::size_t dup = 0;
   const std::set<std::pair<Index, Index>> got = selfCandidates(meeting.step(), id, dup);
   const std::set<std::pair<Index, Index>> got_plain = selfCandidates(plain.step(), id0, dup);
-  std::size_t met = 0, met_by_plain = 0, missed = 0;
-  forEachPairBeyondTheRule(cloth, rest, now, meeting.settings().self_rest_exclusion * radius, [&](Index v, Index t, double) {
-    const Triangle& tri = cloth.triangles[t];
-    bool meets = false;
-    for (int k = 0; k <= 64 && !meets; ++k) {
-      const double s = k / 64.0;
-      const auto at = [&](Index u) { return Vec3((1 - s) * before[u] + s * now[u]); };
-      meets = testkit::pointTriangleDistance(at(v), at(tri[0]), at(tri[1]), at(tri[2])) < radius;
-    }
-    if (!meets) return;
-    ++met;
-    met_by_plain += got_plain.count({v, t});
-    missed += got.count({v, t}) == 0;
-  });
-  std::printf("self pairs that meet during the step: %zu, candidates with meeting pairs: %zu (missed %zu), with the self "
-              "rule's radius alone: %zu of them\n", met, got.size(), missed, met_by_plain);
-  EXPECT_GT(met, 1000u) << "the top layer must pass through the bottom one";
-  EXPECT_EQ(missed, 0u);
-  EXPECT_LT(met_by_plain, met) << "the self rule's radius alone must miss some: else the test shows nothing";
+  EXPECT_GT(got.size(), 1000u) << "the layers must meet";
+  EXPECT_EQ(got, got_plain);
 }
 
 TEST(SelfCollision, TheSelfRadiusIsTwiceTheMarginOrAMultipleOfTheMeanRestEdgeWhicheverIsLarger) {

@@ -71,6 +71,8 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
 /// The same at a given contact radius (what takes the place of the two margins' sum, the motion
 /// term still added): a body against itself at its self contact radius
 /// (psc::SensorWorld::selfRadius) rather than at twice its margin. Contacts carry it as m_margin.
+/// Continuous on a body against itself (node_body == face_body) adds no motion term: its discrete
+/// radius is `radius` alone, and its crossing test stands for the motion.
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body, btScalar radius,
                               const psc::CandidatePair* first, const psc::CandidatePair* last,
                               ContactSet contacts = ContactSet::AllPairs);

@@ -41,8 +41,9 @@ enum class ExactTest {
   /// With `sensors.motion_bound` = Radius (the default) the plugin asks the core for every pair
   /// within Bullet's radius and every pair that meets within the margins during the step
   /// (psc::SensorSettings::meeting_pairs), so between two bodies it makes every contact Robust
-  /// makes and its crossing test sees every pair that can cross; a body's pairs with itself
-  /// (self-collision) are the pairs that meet within its self radius during the step. With Swept
+  /// makes and its crossing test sees every pair that can cross. A body against itself
+  /// (self-collision): the self rule's candidates, its discrete test at the self radius alone (a
+  /// body's speed is no reason to touch itself), and the crossing test. With Swept
   /// only the pairs that meet, so a pair within Bullet's radius that does not meet gets no
   /// contact. With the thesis's flag-only mode (sensors.flagging = Sensors) it tests the thesis's
   /// candidate sets, which hold neither guarantee. Swept, with the margins alone as the
