@@ -102,14 +102,19 @@ void checkCount(const std::string& path, std::uintmax_t size, const std::string&
 
 /// A PLY header must end in an end_header line before assimp sees it: assimp 5.2's PLY reader
 /// loops forever on a header that never ends (a fuzzer found "ply\nformat ascii 1.0\nfoo").
+/// The line must be "end_header" with nothing but spaces, tabs or a carriage return around it:
+/// assimp does not take "end_header" followed by another character (a vertical tab, found by the
+/// fuzzer on 2026-11-26) for the header's end, and loops just the same.
 /// Element counts must fit the file. Other lines are left to assimp, which tolerates
 /// non-standard ones (assimp-testmodels' Wuson.ply has a comment without "comment").
 void checkPlyHeader(const std::string& path, std::uintmax_t size, std::istream& text) {
   for (std::string line; std::getline(text, line);) {
+    const std::size_t first = line.find_first_not_of(" \t");
+    const std::size_t last = line.find_last_not_of(" \t\r");
+    if (first != std::string::npos && line.compare(first, last + 1 - first, "end_header") == 0) return;
     std::istringstream words(line);
     std::string keyword, name, count;
     words >> keyword;
-    if (keyword == "end_header") return;
     if (keyword == "element" && words >> name >> count) checkCount(path, size, name + " elements", count);
   }
   throw fileError(path, "the PLY header has no end_header line within the file's first " +

@@ -145,7 +145,10 @@ BodyId add(SensorWorld& world, Held& h, const char* name, const std::shared_ptr<
 
 // The conservative mode's promise: every vertex-triangle pair of two bodies closer than the
 // contact radius margin_A + margin_B + motion_factor·|x − x_prev| is a candidate pair. Half the
-// radius leaves room for rounding; triangles of (nearly) zero area have no reliable distance.
+// radius leaves room for rounding; triangles of (nearly) zero area have no reliable distance, and
+// neither has a pair whose coordinates reach 1e8 times the radius: the reference distance's
+// rounding then exceeds the radius itself (a vertex at the origin against a sliver with corners
+// at 1e23 came out at 6e-28 from it, where it is 1e5 away).
 void checkCoverage(const SensorWorld& world, const std::vector<Held>& bodies) {
   std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
   for (const CandidatePair& c : world.lastResult().candidates)
@@ -158,11 +161,13 @@ void checkCoverage(const SensorWorld& world, const std::vector<Held>& bodies) {
         const double motion = a.previous.empty() ? 0.0 : (a.mesh.vertices[v] - a.previous[v]).norm();
         return 0.5 * (a.margin + b.margin + factor * motion);
       };
-      const auto flat = [&](Index, Index t) {
+      const auto flat = [&](Index v, Index t) {
         const Triangle& tri = b.mesh.triangles[t];
         const Vec3 &p = b.mesh.vertices[tri[0]], &q = b.mesh.vertices[tri[1]], &r = b.mesh.vertices[tri[2]];
         const double longest = std::max({(q - p).norm(), (r - q).norm(), (p - r).norm()});
-        return !((q - p).cross(r - p).norm() > 1e-6 * longest * longest);
+        const double far = std::max({a.mesh.vertices[v].cwiseAbs().maxCoeff(), p.cwiseAbs().maxCoeff(),
+                                     q.cwiseAbs().maxCoeff(), r.cwiseAbs().maxCoeff()});
+        return !((q - p).cross(r - p).norm() > 1e-6 * longest * longest) || !(far < 1e8 * radius(v));
       };
       testkit::forEachContact(a.mesh.vertices, b.mesh.vertices, b.mesh.triangles, radius, flat,
                               [&](Index v, Index t, double distance) {

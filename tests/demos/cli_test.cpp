@@ -450,11 +450,16 @@ TEST(DemoCli, BrokenMeshFilesGiveAClearErrorAndNonZeroExit) {
                                               "property float y\nproperty float z\nend_header\n0 0 0\n";
     // assimp 5.2 loops forever on a PLY header without end_header (found by scripts/fuzz).
     std::ofstream(dir / "unterminated.ply") << "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n";
+    // ... and on one whose end_header has another character after it (a vertical tab; scripts/fuzz).
+    std::ofstream(dir / "end_header_vt.ply") << "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+                                                 "property float y\nproperty float z\nelement face 1\n"
+                                                 "property list uchar int vertex_indices\nend_header\v\n"
+                                                 "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
     std::ofstream(dir / "points_only.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\np 1\np 2\n";
     std::ofstream(dir / "empty.stl");
   }
-  for (const char* f : {"garbage.obj", "truncated.off", "huge_count.ply", "unterminated.ply", "points_only.obj",
-                        "empty.stl"})
+  for (const char* f : {"garbage.obj", "truncated.off", "huge_count.ply", "unterminated.ply", "end_header_vt.ply",
+                        "points_only.obj", "empty.stl"})
     files.push_back((dir / f).string());
   files.push_back((dir / "does_not_exist.obj").string());
   files.push_back(dir.string());
