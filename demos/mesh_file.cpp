@@ -87,15 +87,17 @@ void collect(const aiScene* scene, TriMesh& out, MeshFileInfo& info, const std::
 /// byte. Without this check assimp believes a header that claims 353,535,235,358 vertices
 /// (assimp-testmodels' OutOfMemory.off) and spends a minute and gigabytes before giving up.
 void checkCount(const std::string& path, std::uintmax_t size, const std::string& what, const std::string& token) {
-  std::size_t used = 0;
-  unsigned long long n = 0;
+  // assimp reads the digits at the start of the token and ignores what follows them ("44ply" is
+  // 44; a fuzzer found an OFF face count with letters after it that made assimp ask for 64 GB).
+  std::size_t digits = 0;
+  while (digits < token.size() && std::isdigit(static_cast<unsigned char>(token[digits])) != 0) ++digits;
+  if (digits == 0) return;
+  unsigned long long n = ~0ull;  // too large for any integer type: absurd as well
   try {
-    n = std::stoull(token, &used);
+    n = std::stoull(token.substr(0, digits));
   } catch (const std::exception&) {
-    n = ~0ull;  // too large for any integer type: absurd as well
-    used = token.find_first_not_of("0123456789") == std::string::npos ? token.size() : 0;
   }
-  if (used == token.size() && n > size)
+  if (n > size)
     throw fileError(path, "the header claims " + token + " " + what + " but the file has only " +
                               std::to_string(size) + " bytes");
 }

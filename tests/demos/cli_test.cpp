@@ -456,10 +456,12 @@ TEST(DemoCli, BrokenMeshFilesGiveAClearErrorAndNonZeroExit) {
                                                  "property list uchar int vertex_indices\nend_header\v\n"
                                                  "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
     std::ofstream(dir / "points_only.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\np 1\np 2\n";
+    // A count with letters after it: assimp reads its digits (scripts/fuzz: 64 GB asked for).
+    std::ofstream(dir / "count_with_letters.off") << "OFF\n4 4444440441510191ply 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n";
     std::ofstream(dir / "empty.stl");
   }
   for (const char* f : {"garbage.obj", "truncated.off", "huge_count.ply", "unterminated.ply", "end_header_vt.ply",
-                        "points_only.obj", "empty.stl"})
+                        "points_only.obj", "count_with_letters.off", "empty.stl"})
     files.push_back((dir / f).string());
   files.push_back((dir / "does_not_exist.obj").string());
   files.push_back(dir.string());
