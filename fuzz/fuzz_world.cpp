@@ -161,7 +161,7 @@ void checkCoverage(const SensorWorld& world, const std::vector<Held>& bodies) {
         const double motion = a.previous.empty() ? 0.0 : (a.mesh.vertices[v] - a.previous[v]).norm();
         return 0.5 * (a.margin + b.margin + factor * motion);
       };
-      const auto flat = [&](Index v, Index t) {
+      const auto unreliable = [&](Index v, Index t) {
         const Triangle& tri = b.mesh.triangles[t];
         const Vec3 &p = b.mesh.vertices[tri[0]], &q = b.mesh.vertices[tri[1]], &r = b.mesh.vertices[tri[2]];
         const double longest = std::max({(q - p).norm(), (r - q).norm(), (p - r).norm()});
@@ -169,7 +169,7 @@ void checkCoverage(const SensorWorld& world, const std::vector<Held>& bodies) {
                                      q.cwiseAbs().maxCoeff(), r.cwiseAbs().maxCoeff()});
         return !((q - p).cross(r - p).norm() > 1e-6 * longest * longest) || !(far < 1e8 * radius(v));
       };
-      testkit::forEachContact(a.mesh.vertices, b.mesh.vertices, b.mesh.triangles, radius, flat,
+      testkit::forEachContact(a.mesh.vertices, b.mesh.vertices, b.mesh.triangles, radius, unreliable,
                               [&](Index v, Index t, double distance) {
                                 if (cand.count({a.id, v, b.id, t}) == 1) return;
                                 std::fprintf(stderr,

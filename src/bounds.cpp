@@ -982,12 +982,13 @@ void gatherVertices(const PairContext& ctx, ChunkRef& c) {
     const double reach2 = swept ? 0.0 : ctx.self_exclude2 >= 0.0 ? r * r : reachOf(x, r);
     // Meeting pairs: the vertex's probes reach at least its own path (margins + |Δx|), whatever
     // motion_factor the radius bound has.
-    if (ctx.meeting && moved) r = std::max(r, ctx.margin_sum + (x - q).norm());
+    const double path = ctx.meeting && moved ? (x - q).norm() : 0.0;
+    if (ctx.meeting) r = std::max(r, ctx.margin_sum + path);
     // nearest_candidates: the probes need not reach past the band of the vertex's nearest so far
     // (the same bound chunkCandidates puts on each probe), so neither do the picking and the
     // kept-triangle box.
     if (ctx.best2 != nullptr && ctx.ahead_steps == 0.0) r = std::min(r, nearestBand(ctx.best2[v]));
-    ctx.s.verts[at + k] = {x, r, xn, v, reach2, ctx.meeting && moved ? (x - q).norm() : 0.0};
+    ctx.s.verts[at + k] = {x, r, xn, v, reach2, path};
     lanes.x[at + k] = x.x();
     lanes.y[at + k] = x.y();
     lanes.z[at + k] = x.z();
@@ -1829,11 +1830,10 @@ class Collector {
     // and region by the refit (RestFit); with the swept bound, the boxes hold the paths.
     static const RestFit kNone;
     const RestFit& fit = X.rest_fit ? *X.rest_fit : kNone;
-    // With meeting pairs a body's pairs with itself keep the self rule's radius: its exact stage
-    // decides at Bullet's radius, wider than the rule's, and would make contacts of every pair the
-    // swept bound's boxes keep (a fast body: millions beyond the rule).
-    const bool swept_self = params_.swept;
-    const bool self_motion = fit.filled && !swept_self;
+    // With meeting pairs (params_.meeting) a body's pairs with itself keep the self rule's radius:
+    // its exact stage decides at Bullet's radius, wider than the rule's, and would make contacts of
+    // every pair the swept bound's boxes keep (a fast body: millions beyond the rule).
+    const bool self_motion = fit.filled && !params_.swept;
     const auto regionBox = [&](Index r) {
       MotionBox box = X.region_box[r];
       if (self_motion) box.motion = fit.region_self_motion[r];
@@ -1865,7 +1865,7 @@ class Collector {
       least_.resize(X.chunks.chunk_of.size(), std::numeric_limits<double>::infinity());
     // The rest-shape bound needs the radius bound's reach (a swept pair may meet during the step).
     const bool rest_bound = params_.self_rest_bound && self_motion;
-    PairContext ctx{X,         X,  radius, half, mf, swept_self, no_axis, g.keys, counters_, s_, exclude * exclude,
+    PairContext ctx{X,         X,  radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude,
                     self_motion ? &fit.mean_motion : nullptr, 0.0, params_.nearest ? &g.d2 : nullptr,
                     params_.nearest ? least_.data() : nullptr};
     if (rest_bound) ctx.rest_fit = &fit;

@@ -672,6 +672,18 @@ struct FlyingBall {
   }
 };
 
+/// Whether vertex v of `a` comes within r of triangle `tri` of `b` at one of 65 times of the step,
+/// both moving linearly from their previous to their current positions (a pair found at a sampled
+/// time certainly meets; the bounds must keep it).
+bool meetsDuringStep(const Body& a, Index v, const Body& b, const Triangle& tri, double r) {
+  for (int k = 0; k <= 64; ++k) {
+    const double s = k / 64.0;
+    const auto at = [&](const Body& x, Index u) { return Vec3((1 - s) * x.previous[u] + s * x.mesh.vertices[u]); };
+    if (testkit::pointTriangleDistance(at(a, v), at(b, tri[0]), at(b, tri[1]), at(b, tri[2])) < r) return true;
+  }
+  return false;
+}
+
 // MotionBound::Swept: every (vertex, triangle) pair that comes within the margins at some time of
 // the step (both moving linearly) is a candidate. Reference: the distance at 65 times of the step
 // (a pair found at a sampled time certainly meets the margins), by brute force. Both bodies move,
@@ -697,14 +709,7 @@ TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
       const Body &a = bodies[i], &b = bodies[1 - i];
       for (Index v = 0; v < a.mesh.vertices.size(); ++v)
         for (Index t = 0; t < b.mesh.triangles.size(); ++t) {
-          const Triangle& tri = b.mesh.triangles[t];
-          bool meets = false;
-          for (int k = 0; k <= 64 && !meets; ++k) {
-            const double s = k / 64.0;
-            const auto at = [&](const Body& x, Index u) { return Vec3((1 - s) * x.previous[u] + s * x.mesh.vertices[u]); };
-            meets = testkit::pointTriangleDistance(at(a, v), at(b, tri[0]), at(b, tri[1]), at(b, tri[2])) < r;
-          }
-          if (!meets) continue;
+          if (!meetsDuringStep(a, v, b, b.mesh.triangles[t], r)) continue;
           ++met;
           EXPECT_EQ(cand.count({a.id, v, b.id, t}), 1u)
               << "step " << step << ": " << a.name << " vertex " << v << " meets " << b.name << " triangle " << t;
@@ -761,13 +766,7 @@ TEST(HardConditions, MeetingPairsJoinTheRadiusBoundAndTheSweptOne) {
               EXPECT_LT(now, std::max(r + factor * dv, r + dv + dt) * (1.0 + 1e-4) + 1e-5)
                   << "step " << step << ": a pair beyond both reaches";
             }
-            bool meets = false;
-            for (int k = 0; k <= 64 && !meets; ++k) {
-              const double s = k / 64.0;
-              const auto at = [&](const Body& x, Index u) { return Vec3((1 - s) * x.previous[u] + s * x.mesh.vertices[u]); };
-              meets = testkit::pointTriangleDistance(at(a, v), at(b, tri[0]), at(b, tri[1]), at(b, tri[2])) < r;
-            }
-            if (!meets) continue;
+            if (!meetsDuringStep(a, v, b, tri, r)) continue;
             ++met;
             met_beyond_radius += got_radius.count(key) == 0;
             EXPECT_EQ(got.count(key), 1u) << "motion_factor " << factor << ", step " << step << ": " << a.name
