@@ -5,12 +5,10 @@
 #include <cmath>
 #include <limits>
 
+#include "robust_kernel.h"
+
 namespace psc::bullet {
 namespace {
-
-/// A triangle is reduced to its edges when |ab × ac|² ≤ this × (longest edge²)², i.e. its height
-/// is below 1e-12 of its longest edge: the same rule as the demo's ground truth.
-constexpr double kDegenerateRelative = 1e-24;
 
 ClosestPoint closestOnSegment(const Vec3& p, const Vec3& a, const Vec3& b) {
   const Vec3 ab = b - a;
@@ -22,25 +20,17 @@ ClosestPoint closestOnSegment(const Vec3& p, const Vec3& a, const Vec3& b) {
   return r;
 }
 
-ClosestPoint fromWeights(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, double wa, double wb,
-                         double wc) {
-  ClosestPoint r;
-  r.weights = {wa, wb, wc};
-  r.distance2 = (p - (a * wa + b * wb + c * wc)).squaredNorm();
-  return r;
-}
-
 double maxEdge2(const Vec3& a, const Vec3& b, const Vec3& c) {
   return std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
 }
 
+detail::RobustV3<double> v3(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
+
 }  // namespace
 
 ClosestPoint closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 ab = b - a, ac = c - a;
-  const double n2 = ab.cross(ac).squaredNorm();
-  const double l2 = maxEdge2(a, b, c);
-  if (!(n2 > kDegenerateRelative * l2 * l2)) {
+  const detail::RobustV3<double> pp = v3(p), aa = v3(a), bb = v3(b), cc = v3(c);
+  if (detail::robustDegenerate(aa, bb, cc)) {
     // Degenerate: the nearest of the three edges (a point-sized triangle gives a's distance).
     ClosestPoint best = closestOnSegment(p, a, b);
     ClosestPoint bc = closestOnSegment(p, b, c);
@@ -49,33 +39,9 @@ ClosestPoint closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b,
     if (ca.distance2 < best.distance2) best = {ca.distance2, {ca.weights[1], 0.0, ca.weights[0]}};
     return best;
   }
-  // Ericson, Real-Time Collision Detection §5.1.5, with the weights kept.
-  const Vec3 ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0.0 && d2 <= 0.0) return fromWeights(p, a, b, c, 1.0, 0.0, 0.0);
-  const Vec3 bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0.0 && d4 <= d3) return fromWeights(p, a, b, c, 0.0, 1.0, 0.0);
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
-    const double v = d1 / (d1 - d3);
-    return fromWeights(p, a, b, c, 1.0 - v, v, 0.0);
-  }
-  const Vec3 cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0.0 && d5 <= d6) return fromWeights(p, a, b, c, 0.0, 0.0, 1.0);
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
-    const double w = d2 / (d2 - d6);
-    return fromWeights(p, a, b, c, 1.0 - w, 0.0, w);
-  }
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
-    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    return fromWeights(p, a, b, c, 0.0, 1.0 - w, w);
-  }
-  const double denom = 1.0 / (va + vb + vc);
-  return fromWeights(p, a, b, c, va * denom, vb * denom, vc * denom);
+  ClosestPoint r;
+  detail::robustClosest(pp, aa, bb, cc, r.weights[0], r.weights[1], r.weights[2], r.distance2);
+  return r;
 }
 
 namespace {

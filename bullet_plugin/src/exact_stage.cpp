@@ -1,5 +1,6 @@
 #include "exact_stage.h"
 
+#include "robust_kernel.h"
 #include "vf_lanes.h"
 
 #include "psc/bullet/exact.h"
@@ -175,15 +176,17 @@ ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::
 /// found the node exactly on the face: the exact closest point in double.
 ContactKind robustContact(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
                           btScalar m, btSoftBody::SContact& contact) {
-  const btVector3 o = node.m_x;
-  const Vec3 po = toVec(o);
-  const ClosestPoint cp = closestPointOnTriangle(po, toVec(face.m_n[0]->m_x), toVec(face.m_n[1]->m_x),
-                                                 toVec(face.m_n[2]->m_x));
+  const Vec3 po = toVec(node.m_x), a = toVec(face.m_n[0]->m_x), b = toVec(face.m_n[1]->m_x),
+             c = toVec(face.m_n[2]->m_x);
+  const ClosestPoint cp = closestPointOnTriangle(po, a, b, c);
   const double radius = double(m);
   if (!(cp.distance2 < radius * radius)) return ContactKind::None;
-  const Vec3 away = po - facePoint(face, cp.weights, false);
-  const double length = away.norm();
-  const Vec3 normal = length > 1e-9 * radius ? Vec3(away / length) : normalWithoutDistance(node, face, cp.weights);
+  // The same operations as detail::robustLanes (vf_lanes.cpp), which decides most such pairs.
+  detail::RobustV3<double> n;
+  const bool short_away = detail::robustNormal<double>({po.x(), po.y(), po.z()}, {a.x(), a.y(), a.z()},
+                                                       {b.x(), b.y(), b.z()}, {c.x(), c.y(), c.z()}, cp.weights[0],
+                                                       cp.weights[1], cp.weights[2], radius, n);
+  const Vec3 normal = short_away ? normalWithoutDistance(node, face, cp.weights) : Vec3(n.x, n.y, n.z);
   const btVector3 w{btScalar(cp.weights[0]), btScalar(cp.weights[1]), btScalar(cp.weights[2])};
   return fillContact(ctx, node, face, w, toBt(normal), m, contact) ? ContactKind::Robust : ContactKind::None;
 }
@@ -340,12 +343,16 @@ namespace {
 
 /// The exact stage eight candidates at a time (detail::vfLanes), in candidate order. Each
 /// candidate's outcome goes to take(node, kind, contact); Bullet's test where the lanes cannot
-/// decide runs Process itself, which pushes its contact. Robust and Continuous run their scalar
-/// discrete test on such lanes; Continuous then adds its crossing test to every lane. The tail
-/// (fewer than eight) runs the scalar tests.
+/// decide runs Process itself, which pushes its contact. Robust's own contacts come from
+/// detail::robustLanes (the scalar robustContact where a face is degenerate or the node lies on
+/// it); without the crossing test they, like Bullet's, are written in place, counted in
+/// `robust_in_place`. Robust and Continuous run their scalar discrete test where the lanes cannot
+/// decide; Continuous then adds its crossing test to every lane. The tail (fewer than eight) runs
+/// the scalar tests.
 template <class Take>
 void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_body, btSoftBody& face_body,
-                    const psc::CandidatePair* first, const psc::CandidatePair* last, Take&& take) {
+                    const psc::CandidatePair* first, const psc::CandidatePair* last, Take&& take,
+                    std::size_t& robust_in_place) {
   static_assert(sizeof(btScalar) == sizeof(float), "the lanes are single precision");
   namespace d = detail;
   const bool robust = test != ExactTest::Bullet;
@@ -375,6 +382,7 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
   };
   d::VfLanesIn in;
   d::VfLanesOut out;
+  d::RobustLanesOut rob;
   constexpr std::ptrdiff_t kAhead = 2 * d::kVfLanes;
   const psc::CandidatePair* c = first;
   for (; last - c >= d::kVfLanes; c += d::kVfLanes) {
@@ -408,13 +416,27 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
     }
     d::vfLanes(in, ctx.mrg, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, robust, ctx.motion_term, out);
     if ((out.contact | out.scalar | out.robust) == 0 && !continuous) continue;
+    if (out.robust != 0) d::robustLanes(in, out.margin, out.robust, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, rob);
     for (int l = 0; l < d::kVfLanes; ++l) {
       const std::uint32_t bit = 1u << l;
       const btSoftBody::Node& node = nodes[c[l].vertex];
       const btSoftBody::Face& face = faces[c[l].triangle];
       ContactKind kind = ContactKind::None;
       if (out.robust & bit) {
-        kind = robustContact(ctx, node, face, out.margin[l], contact);
+        if (rob.scalar & bit) {
+          kind = robustContact(ctx, node, face, out.margin[l], contact);
+        } else if (rob.inside & rob.moves & bit) {
+          // robustContact's contact (fillContact's), all of it from the lanes; without the crossing
+          // test written where it goes, as Bullet's contacts below.
+          btSoftBody::SContact& into = continuous ? contact : node_body.m_scontacts.expandNonInitializing();
+          setContact(ctx, node, face, btVector3(rob.wx[l], rob.wy[l], rob.wz[l]),
+                     btVector3(rob.nx[l], rob.ny[l], rob.nz[l]), out.margin[l], rob.cfm0[l], rob.cfm1[l], into);
+          if (!continuous) {
+            ++robust_in_place;
+            continue;
+          }
+          kind = ContactKind::Robust;
+        }
       } else if (out.scalar & bit) {
         kind = discrete(node, face);
       } else if (out.contact & bit) {
@@ -502,7 +524,7 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
   };
 #if !defined(BT_USE_DOUBLE_PRECISION)
   if (lanes) {
-    collideInLanes(test, ctx, node_body, face_body, first, last, take);
+    collideInLanes(test, ctx, node_body, face_body, first, last, take, counts.robust);
   } else
 #endif
   {

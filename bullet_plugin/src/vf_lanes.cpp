@@ -2,6 +2,7 @@
 
 #include <atomic>
 #include <cfloat>
+#include <cmath>
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
@@ -153,10 +154,104 @@ PSC_AVX void projectEdge(const V3& a, const V3& b, __m256 active, V3& prj, __m25
   out.contact = static_cast<std::uint32_t>(_mm256_movemask_ps(both(both(accept, set), moves))) &
                 ~(out.scalar | out.robust);
 }
-#undef PSC_AVX
 #endif
 
 }  // namespace
+}  // namespace psc::bullet::detail
+
+#if defined(PSC_HAVE_VF_LANES)
+// robust_kernel.h's templates over four lanes of doubles. Everything they call must be compiled
+// for AVX, the templates included: so the header is read with AVX as this region's target.
+#pragma GCC push_options
+#pragma GCC target("avx")
+namespace psc::bullet::detail {
+namespace {
+
+struct D4 {
+  __m256d v;
+  D4() = default;
+  PSC_AVX D4(__m256d x) : v(x) {}               // NOLINT(google-explicit-constructor)
+  PSC_AVX D4(double x) : v(_mm256_set1_pd(x)) {}  // NOLINT(google-explicit-constructor)
+};
+struct M4 {
+  __m256d m;
+};
+PSC_AVX D4 operator+(D4 a, D4 b) { return _mm256_add_pd(a.v, b.v); }
+PSC_AVX D4 operator-(D4 a, D4 b) { return _mm256_sub_pd(a.v, b.v); }
+PSC_AVX D4 operator*(D4 a, D4 b) { return _mm256_mul_pd(a.v, b.v); }
+PSC_AVX D4 operator/(D4 a, D4 b) { return _mm256_div_pd(a.v, b.v); }
+PSC_AVX D4 sqrt(D4 a) { return _mm256_sqrt_pd(a.v); }
+PSC_AVX M4 le(D4 a, D4 b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_LE_OQ)}; }
+PSC_AVX M4 ge(D4 a, D4 b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_GE_OQ)}; }
+PSC_AVX M4 gt(D4 a, D4 b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_GT_OQ)}; }
+PSC_AVX M4 lt(D4 a, D4 b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_LT_OQ)}; }
+PSC_AVX M4 notGreater(D4 a, D4 b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_NGT_UQ)}; }  // !(a > b)
+PSC_AVX M4 both(M4 a, M4 b) { return {_mm256_and_pd(a.m, b.m)}; }
+PSC_AVX D4 select(M4 m, D4 if_true, D4 if_false) { return _mm256_blendv_pd(if_false.v, if_true.v, m.m); }
+
+}  // namespace
+}  // namespace psc::bullet::detail
+
+#include "robust_kernel.h"
+
+namespace psc::bullet::detail {
+namespace {
+
+/// Lanes [from, from + 4) of a float array, as doubles (exactly).
+PSC_AVX D4 widen(const float* lanes, int from) { return _mm256_cvtps_pd(_mm_load_ps(lanes + from)); }
+PSC_AVX void narrow(D4 x, float* lanes, int from) { _mm_store_ps(lanes + from, _mm256_cvtpd_ps(x.v)); }
+
+void robustLanesAvx(const VfLanesIn& in, const float* margin, std::uint32_t lanes, float kshr0, float kshr1,
+                    RobustLanesOut& out) {
+  std::uint32_t scalar = 0, inside = 0;
+  for (int from = 0; from < kVfLanes; from += 4) {
+    if (((lanes >> from) & 0xFu) == 0) continue;
+    const RobustV3<D4> p{widen(in.ox, from), widen(in.oy, from), widen(in.oz, from)};
+    const RobustV3<D4> a{widen(in.ax, from), widen(in.ay, from), widen(in.az, from)};
+    const RobustV3<D4> b{widen(in.bx, from), widen(in.by, from), widen(in.bz, from)};
+    const RobustV3<D4> c{widen(in.cx, from), widen(in.cy, from), widen(in.cz, from)};
+    const M4 degenerate = robustDegenerate(a, b, c);
+    D4 wa, wb, wc, distance2;
+    robustClosest(p, a, b, c, wa, wb, wc, distance2);
+    const D4 radius = widen(margin, from);
+    const M4 within = lt(distance2, radius * radius);
+    RobustV3<D4> n;
+    const M4 short_away = robustNormal(p, a, b, c, wa, wb, wc, radius, n);
+    narrow(wa, out.wx, from);
+    narrow(wb, out.wy, from);
+    narrow(wc, out.wz, from);
+    narrow(n.x, out.nx, from);
+    narrow(n.y, out.ny, from);
+    narrow(n.z, out.nz, from);
+    scalar |= static_cast<std::uint32_t>(_mm256_movemask_pd(_mm256_or_pd(degenerate.m, short_away.m))) << from;
+    inside |= static_cast<std::uint32_t>(_mm256_movemask_pd(within.m)) << from;
+  }
+  // fillContact's masses and constraint mixing at these weights, in float, as lanesAvx has them
+  // for Bullet's weights.
+  const __m256 zero = _mm256_setzero_ps();
+  const __m256 wx = _mm256_load_ps(out.wx), wy = _mm256_load_ps(out.wy), wz = _mm256_load_ps(out.wz);
+  const __m256 ma = _mm256_load_ps(in.im);
+  const __m256 ia = _mm256_load_ps(in.ia), ib = _mm256_load_ps(in.ib), ic = _mm256_load_ps(in.ic);
+  const __m256 fixed = _mm256_or_ps(_mm256_cmp_ps(ia, zero, _CMP_LE_OQ),
+                                    _mm256_or_ps(_mm256_cmp_ps(ib, zero, _CMP_LE_OQ), _mm256_cmp_ps(ic, zero, _CMP_LE_OQ)));
+  const __m256 mb = _mm256_blendv_ps(
+      _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ia, wx), _mm256_mul_ps(ib, wy)), _mm256_mul_ps(ic, wz)), zero, fixed);
+  const __m256 ms = _mm256_add_ps(ma, mb);
+  _mm256_store_ps(out.cfm0, _mm256_mul_ps(_mm256_div_ps(ma, ms), _mm256_set1_ps(kshr0)));
+  _mm256_store_ps(out.cfm1, _mm256_mul_ps(_mm256_div_ps(mb, ms), _mm256_set1_ps(kshr1)));
+  const auto moves = static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(ms, zero, _CMP_GT_OQ)));
+  out.scalar = scalar;
+  out.inside = inside;
+  out.moves = moves;
+}
+
+}  // namespace
+}  // namespace psc::bullet::detail
+#pragma GCC pop_options
+#undef PSC_AVX
+#endif
+
+namespace psc::bullet::detail {
 
 bool vfLanesEnabled() {
 #if defined(PSC_HAVE_VF_LANES)
@@ -164,6 +259,17 @@ bool vfLanesEnabled() {
   return has && g_allowed.load(std::memory_order_relaxed);
 #else
   return false;
+#endif
+}
+
+void robustLanes(const VfLanesIn& in, const float* margin, std::uint32_t lanes, float kshr0, float kshr1,
+                 RobustLanesOut& out) {
+#if defined(PSC_HAVE_VF_LANES)
+  robustLanesAvx(in, margin, lanes, kshr0, kshr1, out);
+#else
+  (void)in, (void)margin, (void)lanes, (void)kshr0, (void)kshr1;
+  out.inside = 0;
+  out.scalar = ~0u;  // never reached: vfLanesEnabled() is false
 #endif
 }
 

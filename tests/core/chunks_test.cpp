@@ -10,6 +10,7 @@
 
 #include <array>
 #include <cmath>
+#include <limits>
 #include <iostream>
 #include <random>
 #include <set>
@@ -142,7 +143,7 @@ TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
         const auto at = [&](Index u) { return b.positions[u]; };
         const auto before = [&](Index u) { return b.previous[u]; };
         EXPECT_EQ(ch.foreign.slotWidth(), ch.count() < 256 ? 1u : 2u);
-        std::size_t outside = 0, short_motion = 0;
+        std::size_t outside = 0, short_motion = 0, loose = 0, long_motion = 0;
         const auto holds = [](const MotionBox& box, const Vec3& p) {
           return (box.lo.array() <= p.array()).all() && (p.array() <= box.hi.array()).all();
         };
@@ -150,13 +151,29 @@ TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
           const MotionBox& box = b.chunk_box[c];
           for (std::size_t k = ch.triangle_begin[c]; k < ch.triangle_begin[c + 1]; ++k)
             for (Index u : ch.triangle(c, k)) outside += !holds(box, at(u)) + (swept && !holds(box, before(u)));
+          // Tight too: the box is exactly the smallest one around those points (the fast pass
+          // only picks coordinates, as the generic one does).
+          Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+          const auto take = [&](Index u) {
+            lo = lo.cwiseMin(at(u)).cwiseMin(swept ? before(u) : at(u));
+            hi = hi.cwiseMax(at(u)).cwiseMax(swept ? before(u) : at(u));
+          };
+          for (std::size_t k = ch.triangle_begin[c]; k < ch.triangle_begin[c + 1]; ++k)
+            for (Index u : ch.triangle(c, k)) take(u);
+          double motion = 0.0;
           for (Index u : ch.vertices(c)) {
+            take(u);
             outside += !holds(box, at(u)) + (swept && !holds(box, before(u)));
             if (!swept) short_motion += box.motion < (at(u) - before(u)).norm() * (1.0 - 1e-6);
+            motion = std::max(motion, (at(u) - before(u)).norm());
           }
+          loose += box.lo != lo || box.hi != hi;
+          if (!swept) long_motion += box.motion > motion * (1.0 + 2e-6);
         }
         EXPECT_EQ(outside, 0u) << resolution << (single ? " single" : " double") << (swept ? " swept" : "");
         EXPECT_EQ(short_motion, 0u) << resolution << (single ? " single" : " double");
+        EXPECT_EQ(loose, 0u) << resolution << (single ? " single" : " double") << (swept ? " swept" : "");
+        EXPECT_EQ(long_motion, 0u) << resolution << (single ? " single" : " double");
       }
     }
   }
