@@ -65,44 +65,45 @@ template <class R>
   const R vc = d1 * d4 - d3 * d2;
   const R vb = d5 * d2 - d1 * d6;
   const R va = d3 * d6 - d5 * d4;
-  // Inside the face.
-  const R denom = one / ((va + vb) + vc);
-  wa = va * denom;
-  wb = vb * denom;
-  wc = vc * denom;
-  // Then each region from the last in Ericson's order to the first, each overriding the later ones.
-  // Edge BC.
+  // Each region's weights need at most one division, num / den: the face's inside (1 over the
+  // sum, then three products), or the fraction t along the edge of an edge region. The lane's own
+  // pair is picked first, in Ericson's order of the edges (AB before AC before BC; a corner or the
+  // inside below overrides them as Ericson's earlier returns do), so one division serves every
+  // region, with the same operands, and the same result, as a division per region.
   const R e43 = d4 - d3, e56 = d5 - d6;
-  const R w_bc = e43 / (e43 + e56);
   const auto on_bc = both(both(le(va, zero), ge(e43, zero)), ge(e56, zero));
-  wa = select(on_bc, zero, wa);
-  wb = select(on_bc, one - w_bc, wb);
-  wc = select(on_bc, w_bc, wc);
-  // Edge AC.
-  const R w_ac = d2 / (d2 - d6);
   const auto on_ac = both(both(le(vb, zero), ge(d2, zero)), le(d6, zero));
-  wa = select(on_ac, one - w_ac, wa);
-  wb = select(on_ac, zero, wb);
-  wc = select(on_ac, w_ac, wc);
-  // Corner C.
+  const auto on_ab = both(both(le(vc, zero), ge(d1, zero)), le(d3, zero));
   const auto at_c = both(ge(d6, zero), le(d5, d6));
-  wa = select(at_c, zero, wa);
+  const auto at_b = both(ge(d3, zero), le(d4, d3));
+  const auto at_a = both(le(d1, zero), le(d2, zero));
+  R num = select(on_bc, e43, one), den = select(on_bc, e43 + e56, (va + vb) + vc);
+  num = select(on_ac, d2, num);
+  den = select(on_ac, d2 - d6, den);
+  num = select(on_ab, d1, num);
+  den = select(on_ab, d1 - d3, den);
+  const R t = num / den;
+  // Inside the face.
+  wa = va * t;
+  wb = vb * t;
+  wc = vc * t;
+  // Then each region from the last in Ericson's order to the first, each overriding the later ones.
+  wa = select(on_bc, zero, wa);  // edge BC
+  wb = select(on_bc, one - t, wb);
+  wc = select(on_bc, t, wc);
+  wa = select(on_ac, one - t, wa);  // edge AC
+  wb = select(on_ac, zero, wb);
+  wc = select(on_ac, t, wc);
+  wa = select(at_c, zero, wa);  // corner C
   wb = select(at_c, zero, wb);
   wc = select(at_c, one, wc);
-  // Edge AB.
-  const R v_ab = d1 / (d1 - d3);
-  const auto on_ab = both(both(le(vc, zero), ge(d1, zero)), le(d3, zero));
-  wa = select(on_ab, one - v_ab, wa);
-  wb = select(on_ab, v_ab, wb);
+  wa = select(on_ab, one - t, wa);  // edge AB
+  wb = select(on_ab, t, wb);
   wc = select(on_ab, zero, wc);
-  // Corner B.
-  const auto at_b = both(ge(d3, zero), le(d4, d3));
-  wa = select(at_b, zero, wa);
+  wa = select(at_b, zero, wa);  // corner B
   wb = select(at_b, one, wb);
   wc = select(at_b, zero, wc);
-  // Corner A.
-  const auto at_a = both(le(d1, zero), le(d2, zero));
-  wa = select(at_a, one, wa);
+  wa = select(at_a, one, wa);  // corner A
   wb = select(at_a, zero, wb);
   wc = select(at_a, zero, wc);
   const RobustV3<R> q{(a.x * wa + b.x * wb) + c.x * wc, (a.y * wa + b.y * wb) + c.y * wc,
@@ -125,7 +126,7 @@ template <class R>
 }
 
 /// The contact's direction: p minus the face point at weights (wa, wb, wc), evaluated as the face
-/// point is, from zero, corner by corner; its length, and the unit normal away / length. `short`
+/// point is, from zero, corner by corner; its length, and the unit normal away · (1 / length). `short`
 /// holds where the length is at most 1e-9 of the radius: there the normal is the caller's to find.
 template <class R>
 [[gnu::always_inline]] inline auto robustNormal(const RobustV3<R>& p, const RobustV3<R>& a, const RobustV3<R>& b,
@@ -136,7 +137,8 @@ template <class R>
                       ((zero + wa * a.z) + wb * b.z) + wc * c.z};
   const RobustV3<R> away = minus(p, f);
   const R length = sqrt(dot3(away, away));
-  normal = {away.x / length, away.y / length, away.z / length};
+  const R inverse = R(1.0) / length;
+  normal = {away.x * inverse, away.y * inverse, away.z * inverse};
   return notGreater(length, R(1e-9) * radius);
 }
 

@@ -34,7 +34,12 @@ PSC_AVX __m256 both(__m256 a, __m256 b) { return _mm256_and_ps(a, b); }
 PSC_AVX __m256 either(__m256 a, __m256 b) { return _mm256_or_ps(a, b); }
 PSC_AVX __m256 butNot(__m256 a, __m256 not_b) { return _mm256_andnot_ps(not_b, a); }  // a && !not_b
 PSC_AVX __m256 negate(__m256 a) { return _mm256_xor_ps(a, _mm256_set1_ps(-0.0f)); }  // exact, like unary minus
-PSC_AVX __m256 pick(__m256 keep, __m256 take, __m256 mask) { return _mm256_blendv_ps(keep, take, mask); }
+// Masks are whole lanes (compares and their and/or): and, andnot and or select exactly as blendv
+// would. GCC 12 folds _mm256_blendv_ps into a vector condition on the mask's sign bits, which
+// AVX (no 256-bit integer compare) cannot expand: it became eight scalar branches per select.
+PSC_AVX __m256 pick(__m256 keep, __m256 take, __m256 mask) {
+  return _mm256_or_ps(_mm256_and_ps(mask, take), _mm256_andnot_ps(mask, keep));
+}
 
 PSC_AVX V3 load(const float* x, const float* y, const float* z) {
   return {_mm256_load_ps(x), _mm256_load_ps(y), _mm256_load_ps(z)};
@@ -187,7 +192,9 @@ PSC_AVX M4 gt(D4 a, D4 b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_GT_OQ)}; }
 PSC_AVX M4 lt(D4 a, D4 b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_LT_OQ)}; }
 PSC_AVX M4 notGreater(D4 a, D4 b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_NGT_UQ)}; }  // !(a > b)
 PSC_AVX M4 both(M4 a, M4 b) { return {_mm256_and_pd(a.m, b.m)}; }
-PSC_AVX D4 select(M4 m, D4 if_true, D4 if_false) { return _mm256_blendv_pd(if_false.v, if_true.v, m.m); }
+PSC_AVX D4 select(M4 m, D4 if_true, D4 if_false) {  // as pick above: no blendv
+  return _mm256_or_pd(_mm256_and_pd(m.m, if_true.v), _mm256_andnot_pd(m.m, if_false.v));
+}
 
 }  // namespace
 }  // namespace psc::bullet::detail
@@ -234,8 +241,8 @@ void robustLanesAvx(const VfLanesIn& in, const float* margin, std::uint32_t lane
   const __m256 ia = _mm256_load_ps(in.ia), ib = _mm256_load_ps(in.ib), ic = _mm256_load_ps(in.ic);
   const __m256 fixed = _mm256_or_ps(_mm256_cmp_ps(ia, zero, _CMP_LE_OQ),
                                     _mm256_or_ps(_mm256_cmp_ps(ib, zero, _CMP_LE_OQ), _mm256_cmp_ps(ic, zero, _CMP_LE_OQ)));
-  const __m256 mb = _mm256_blendv_ps(
-      _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ia, wx), _mm256_mul_ps(ib, wy)), _mm256_mul_ps(ic, wz)), zero, fixed);
+  const __m256 mb = _mm256_andnot_ps(
+      fixed, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ia, wx), _mm256_mul_ps(ib, wy)), _mm256_mul_ps(ic, wz)));
   const __m256 ms = _mm256_add_ps(ma, mb);
   _mm256_store_ps(out.cfm0, _mm256_mul_ps(_mm256_div_ps(ma, ms), _mm256_set1_ps(kshr0)));
   _mm256_store_ps(out.cfm1, _mm256_mul_ps(_mm256_div_ps(mb, ms), _mm256_set1_ps(kshr1)));
