@@ -90,34 +90,19 @@ double rootInPiece(const double c[4], double lo, double hi, double flo, double f
 }  // namespace
 
 std::optional<Crossing> firstCrossing(const std::array<Vec3, 4>& start, const std::array<Vec3, 4>& end) {
-  // Relative to the triangle's first vertex: f(t) = (e1(t) × e2(t)) · r(t), each linear in t.
-  const Vec3 e1_0 = start[2] - start[1], e2_0 = start[3] - start[1], r_0 = start[0] - start[1];
-  const Vec3 e1_1 = end[2] - end[1], e2_1 = end[3] - end[1], r_1 = end[0] - end[1];
-  const Vec3 de1 = e1_1 - e1_0, de2 = e2_1 - e2_0, dr = r_1 - r_0;
-  const Vec3 n0 = e1_0.cross(e2_0);
-  const Vec3 n1 = e1_0.cross(de2) + de1.cross(e2_0);
-  const Vec3 n2 = de1.cross(de2);
-  const double c[4] = {n0.dot(r_0), n0.dot(dr) + n1.dot(r_0), n1.dot(dr) + n2.dot(r_0), n2.dot(dr)};
-  // Rounding of f is a few ulps of L³; values within tol are zero (a touch, or coplanar).
-  const double scale = std::sqrt(std::max({e1_0.squaredNorm(), e2_0.squaredNorm(), r_0.squaredNorm(),
-                                           e1_1.squaredNorm(), e2_1.squaredNorm(), r_1.squaredNorm()}));
+  // Relative to the triangle's first vertex: f(t) = (e1(t) × e2(t)) · r(t), each linear in t, with
+  // its coefficients, scale and rounding tolerance, and the tests that rule a crossing out, from
+  // robust_kernel.h (which the exact stage's lanes run first, four pairs at a time).
+  double c[4], scale = 0.0, tol = 0.0;
+  const bool ruled_out = detail::crossingRuledOut(
+      v3(start[0]), v3(start[1]), v3(start[2]), v3(start[3]), v3(end[0]), v3(end[1]), v3(end[2]), v3(end[3]), c, scale,
+      tol, kCrossingTolerance, std::numeric_limits<double>::epsilon());
   if (!(scale > 0.0) || !std::isfinite(scale)) return std::nullopt;
-  const double tol = 64.0 * std::numeric_limits<double>::epsilon() * scale * scale * scale;
-  // Bernstein coefficients on [0, 1] bound f: all beyond ±tol on one side means no root.
-  const double b[4] = {c[0], c[0] + c[1] / 3.0, c[0] + (2.0 * c[1] + c[2]) / 3.0, c[0] + c[1] + c[2] + c[3]};
-  const double bmin = std::min({b[0], b[1], b[2], b[3]}), bmax = std::max({b[0], b[1], b[2], b[3]});
-  if (bmin > tol || bmax < -tol) return std::nullopt;
-  if (bmin >= -tol && bmax <= tol) return std::nullopt;  // coplanar all step: never changes side
-
-  // The swept triangle lies in the box of its six positions: a point whose segment's box misses
-  // it (by more than the inside tolerance) cannot meet it.
-  {
-    const Vec3 tri_lo = start[1].cwiseMin(start[2]).cwiseMin(start[3]).cwiseMin(end[1]).cwiseMin(end[2]).cwiseMin(end[3]);
-    const Vec3 tri_hi = start[1].cwiseMax(start[2]).cwiseMax(start[3]).cwiseMax(end[1]).cwiseMax(end[2]).cwiseMax(end[3]);
-    const double slack = 2.0 * kCrossingTolerance * (tri_hi - tri_lo).maxCoeff();
-    const Vec3 p_lo = start[0].cwiseMin(end[0]), p_hi = start[0].cwiseMax(end[0]);
-    if (((p_lo - tri_hi).array() > slack).any() || ((tri_lo - p_hi).array() > slack).any()) return std::nullopt;
-  }
+  // Rounding of f is a few ulps of L³ (tol); Bernstein coefficients on [0, 1] beyond ±tol on one
+  // side mean no root, all within ±tol coplanar all step (never changes side); and the swept
+  // triangle lies in the box of its six positions: a point whose segment's box misses it (by more
+  // than the inside tolerance) cannot meet it.
+  if (ruled_out) return std::nullopt;
   // Monotone pieces of f between 0, the roots of f' in (0, 1), and 1.
   double s[4] = {0.0};
   int count = 1;

@@ -376,8 +376,9 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
     }
     return discreteTest(true, ctx, node, face, contact);
   };
-  const auto finish = [&](const btSoftBody::Node& node, const btSoftBody::Face& face, ContactKind kind) {
-    if (continuous) kind = crossingOver(ctx, node, face, kind, contact);
+  std::uint32_t crossing_ruled_out = ~0u;  // per lane of the current eight; the tail: none ruled out
+  const auto finish = [&](const btSoftBody::Node& node, const btSoftBody::Face& face, ContactKind kind, int lane) {
+    if (continuous && !((crossing_ruled_out >> lane) & 1u)) kind = crossingOver(ctx, node, face, kind, contact);
     take(node, kind, contact);
   };
   d::VfLanesIn in;
@@ -413,9 +414,17 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
       in.ax[l] = na.m_x.x(), in.ay[l] = na.m_x.y(), in.az[l] = na.m_x.z(), in.ia[l] = na.m_im;
       in.bx[l] = nb.m_x.x(), in.by[l] = nb.m_x.y(), in.bz[l] = nb.m_x.z(), in.ib[l] = nb.m_im;
       in.cx[l] = nc.m_x.x(), in.cy[l] = nc.m_x.y(), in.cz[l] = nc.m_x.z(), in.ic[l] = nc.m_im;
+      if (continuous) {
+        in.aqx[l] = na.m_q.x(), in.aqy[l] = na.m_q.y(), in.aqz[l] = na.m_q.z();
+        in.bqx[l] = nb.m_q.x(), in.bqy[l] = nb.m_q.y(), in.bqz[l] = nb.m_q.z();
+        in.cqx[l] = nc.m_q.x(), in.cqy[l] = nc.m_q.y(), in.cqz[l] = nc.m_q.z();
+      }
     }
     d::vfLanes(in, ctx.mrg, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, robust, ctx.motion_term, out);
-    if ((out.contact | out.scalar | out.robust) == 0 && !continuous) continue;
+    // Continuous: the lanes whose node cannot have passed through the face keep the discrete
+    // outcome (firstCrossing would return no crossing, by the same operations).
+    crossing_ruled_out = continuous ? d::crossingRuledOutLanes(in) : ~0u;
+    if ((out.contact | out.scalar | out.robust) == 0 && (crossing_ruled_out & 0xFFu) == 0xFFu) continue;
     if (out.robust != 0) d::robustLanes(in, out.margin, out.robust, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, rob);
     for (int l = 0; l < d::kVfLanes; ++l) {
       const std::uint32_t bit = 1u << l;
@@ -450,13 +459,14 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
         if (!continuous) continue;
         kind = ContactKind::Bullet;
       }
-      finish(node, face, kind);
+      finish(node, face, kind, l);
     }
   }
+  crossing_ruled_out = 0;
   for (; c != last; ++c) {
     const btSoftBody::Node& node = nodes[c->vertex];
     const btSoftBody::Face& face = faces[c->triangle];
-    finish(node, face, discrete(node, face));
+    finish(node, face, discrete(node, face), 0);
   }
 }
 

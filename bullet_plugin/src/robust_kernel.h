@@ -28,7 +28,9 @@ inline bool le(double a, double b) { return a <= b; }
 inline bool ge(double a, double b) { return a >= b; }
 inline bool gt(double a, double b) { return a > b; }
 inline bool notGreater(double a, double b) { return !(a > b); }
+inline bool lt(double a, double b) { return a < b; }
 inline bool both(bool a, bool b) { return a && b; }
+inline bool either(bool a, bool b) { return a || b; }
 inline double select(bool m, double if_true, double if_false) { return m ? if_true : if_false; }
 using std::sqrt;
 
@@ -140,6 +142,73 @@ template <class R>
   const R inverse = R(1.0) / length;
   normal = {away.x * inverse, away.y * inverse, away.z * inverse};
   return notGreater(length, R(1e-9) * radius);
+}
+
+template <class R>
+[[gnu::always_inline]] inline RobustV3<R> cross3(const RobustV3<R>& a, const RobustV3<R>& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+template <class R>
+[[gnu::always_inline]] inline RobustV3<R> plus(const RobustV3<R>& a, const RobustV3<R>& b) {
+  return {a.x + b.x, a.y + b.y, a.z + b.z};
+}
+template <class R>
+[[gnu::always_inline]] inline R larger(R a, R b) {
+  return select(gt(b, a), b, a);
+}
+template <class R>
+[[gnu::always_inline]] inline R smaller(R a, R b) {
+  return select(lt(b, a), b, a);
+}
+
+/// The start of firstCrossing (exact_geometry.cpp): a point moving from p0 to p1 against a
+/// triangle moving from (a0, b0, c0) to (a1, b1, c1), each linear over the step. f(t) = (e1(t) ×
+/// e2(t)) · r(t), relative to the first corner, is the cubic c[0] + c[1] t + c[2] t² + c[3] t³;
+/// `scale` is the longest of the six relative vectors and `tol` the rounding of f. Returns where
+/// the point cannot cross: f keeps one sign beyond ±tol over [0, 1] by its Bernstein bound, or stays
+/// within ±tol (coplanar for the whole step), or the point's path box misses the box of the
+/// triangle's six positions by more than the inside tolerance. Where it returns false, scale may
+/// be 0 or not finite: firstCrossing checks that first.
+template <class R>
+[[gnu::always_inline]] inline auto crossingRuledOut(const RobustV3<R>& p0, const RobustV3<R>& a0, const RobustV3<R>& b0,
+                                                    const RobustV3<R>& c0, const RobustV3<R>& p1, const RobustV3<R>& a1,
+                                                    const RobustV3<R>& b1, const RobustV3<R>& c1, R c[4], R& scale,
+                                                    R& tol, double crossing_tolerance, double epsilon) {
+  const RobustV3<R> e1_0 = minus(b0, a0), e2_0 = minus(c0, a0), r_0 = minus(p0, a0);
+  const RobustV3<R> e1_1 = minus(b1, a1), e2_1 = minus(c1, a1), r_1 = minus(p1, a1);
+  const RobustV3<R> de1 = minus(e1_1, e1_0), de2 = minus(e2_1, e2_0), dr = minus(r_1, r_0);
+  const RobustV3<R> n0 = cross3(e1_0, e2_0);
+  const RobustV3<R> n1 = plus(cross3(e1_0, de2), cross3(de1, e2_0));
+  const RobustV3<R> n2 = cross3(de1, de2);
+  c[0] = dot3(n0, r_0);
+  c[1] = dot3(n0, dr) + dot3(n1, r_0);
+  c[2] = dot3(n1, dr) + dot3(n2, r_0);
+  c[3] = dot3(n2, dr);
+  const R longest = larger(larger(larger(dot3(e1_0, e1_0), dot3(e2_0, e2_0)), larger(dot3(r_0, r_0), dot3(e1_1, e1_1))),
+                           larger(dot3(e2_1, e2_1), dot3(r_1, r_1)));
+  scale = sqrt(longest);
+  tol = R(64.0 * epsilon) * scale * scale * scale;
+  const R three(3.0), two(2.0);
+  const R bern0 = c[0], bern1 = c[0] + c[1] / three, bern2 = c[0] + (two * c[1] + c[2]) / three,
+          bern3 = ((c[0] + c[1]) + c[2]) + c[3];
+  const R bmin = smaller(smaller(bern0, bern1), smaller(bern2, bern3));
+  const R bmax = larger(larger(bern0, bern1), larger(bern2, bern3));
+  const R minus_tol = R(0.0) - tol;
+  auto out = either(gt(bmin, tol), lt(bmax, minus_tol));
+  out = either(out, both(ge(bmin, minus_tol), le(bmax, tol)));
+  // The boxes, with the same slack as firstCrossing's inside test.
+  const R lo_x = smaller(smaller(smaller(a0.x, b0.x), smaller(c0.x, a1.x)), smaller(b1.x, c1.x));
+  const R lo_y = smaller(smaller(smaller(a0.y, b0.y), smaller(c0.y, a1.y)), smaller(b1.y, c1.y));
+  const R lo_z = smaller(smaller(smaller(a0.z, b0.z), smaller(c0.z, a1.z)), smaller(b1.z, c1.z));
+  const R hi_x = larger(larger(larger(a0.x, b0.x), larger(c0.x, a1.x)), larger(b1.x, c1.x));
+  const R hi_y = larger(larger(larger(a0.y, b0.y), larger(c0.y, a1.y)), larger(b1.y, c1.y));
+  const R hi_z = larger(larger(larger(a0.z, b0.z), larger(c0.z, a1.z)), larger(b1.z, c1.z));
+  const R slack = R(2.0 * crossing_tolerance) * larger(larger(hi_x - lo_x, hi_y - lo_y), hi_z - lo_z);
+  const R plo_x = smaller(p0.x, p1.x), plo_y = smaller(p0.y, p1.y), plo_z = smaller(p0.z, p1.z);
+  const R phi_x = larger(p0.x, p1.x), phi_y = larger(p0.y, p1.y), phi_z = larger(p0.z, p1.z);
+  out = either(out, either(either(gt(plo_x - hi_x, slack), gt(plo_y - hi_y, slack)), gt(plo_z - hi_z, slack)));
+  out = either(out, either(either(gt(lo_x - phi_x, slack), gt(lo_y - phi_y, slack)), gt(lo_z - phi_z, slack)));
+  return out;
 }
 
 }  // namespace

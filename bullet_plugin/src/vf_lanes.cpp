@@ -3,6 +3,9 @@
 #include <atomic>
 #include <cfloat>
 #include <cmath>
+#include <limits>
+
+#include "psc/bullet/exact.h"
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
@@ -192,6 +195,7 @@ PSC_AVX M4 gt(D4 a, D4 b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_GT_OQ)}; }
 PSC_AVX M4 lt(D4 a, D4 b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_LT_OQ)}; }
 PSC_AVX M4 notGreater(D4 a, D4 b) { return {_mm256_cmp_pd(a.v, b.v, _CMP_NGT_UQ)}; }  // !(a > b)
 PSC_AVX M4 both(M4 a, M4 b) { return {_mm256_and_pd(a.m, b.m)}; }
+PSC_AVX M4 either(M4 a, M4 b) { return {_mm256_or_pd(a.m, b.m)}; }
 PSC_AVX D4 select(M4 m, D4 if_true, D4 if_false) {  // as pick above: no blendv
   return _mm256_or_pd(_mm256_and_pd(m.m, if_true.v), _mm256_andnot_pd(m.m, if_false.v));
 }
@@ -252,6 +256,25 @@ void robustLanesAvx(const VfLanesIn& in, const float* margin, std::uint32_t lane
   out.moves = moves;
 }
 
+std::uint32_t crossingRuledOutAvx(const VfLanesIn& in) {
+  std::uint32_t out = 0;
+  for (int from = 0; from < kVfLanes; from += 4) {
+    const RobustV3<D4> p0{widen(in.qx, from), widen(in.qy, from), widen(in.qz, from)};
+    const RobustV3<D4> a0{widen(in.aqx, from), widen(in.aqy, from), widen(in.aqz, from)};
+    const RobustV3<D4> b0{widen(in.bqx, from), widen(in.bqy, from), widen(in.bqz, from)};
+    const RobustV3<D4> c0{widen(in.cqx, from), widen(in.cqy, from), widen(in.cqz, from)};
+    const RobustV3<D4> p1{widen(in.ox, from), widen(in.oy, from), widen(in.oz, from)};
+    const RobustV3<D4> a1{widen(in.ax, from), widen(in.ay, from), widen(in.az, from)};
+    const RobustV3<D4> b1{widen(in.bx, from), widen(in.by, from), widen(in.bz, from)};
+    const RobustV3<D4> c1{widen(in.cx, from), widen(in.cy, from), widen(in.cz, from)};
+    D4 c[4], scale, tol;
+    const M4 ruled_out = crossingRuledOut(p0, a0, b0, c0, p1, a1, b1, c1, c, scale, tol, kCrossingTolerance,
+                                          std::numeric_limits<double>::epsilon());
+    out |= static_cast<std::uint32_t>(_mm256_movemask_pd(ruled_out.m)) << from;
+  }
+  return out;
+}
+
 }  // namespace
 }  // namespace psc::bullet::detail
 #pragma GCC pop_options
@@ -277,6 +300,15 @@ void robustLanes(const VfLanesIn& in, const float* margin, std::uint32_t lanes, 
   (void)in, (void)margin, (void)lanes, (void)kshr0, (void)kshr1;
   out.inside = 0;
   out.scalar = ~0u;  // never reached: vfLanesEnabled() is false
+#endif
+}
+
+std::uint32_t crossingRuledOutLanes(const VfLanesIn& in) {
+#if defined(PSC_HAVE_VF_LANES)
+  return crossingRuledOutAvx(in);
+#else
+  (void)in;
+  return 0;  // never reached: vfLanesEnabled() is false
 #endif
 }
 

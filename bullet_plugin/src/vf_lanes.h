@@ -26,6 +26,9 @@ struct VfLanesIn {
   alignas(32) float ax[kVfLanes], ay[kVfLanes], az[kVfLanes];  ///< the face's corners' m_x
   alignas(32) float bx[kVfLanes], by[kVfLanes], bz[kVfLanes];
   alignas(32) float cx[kVfLanes], cy[kVfLanes], cz[kVfLanes];
+  alignas(32) float aqx[kVfLanes], aqy[kVfLanes], aqz[kVfLanes];  ///< the corners' m_q (crossingLanes only)
+  alignas(32) float bqx[kVfLanes], bqy[kVfLanes], bqz[kVfLanes];
+  alignas(32) float cqx[kVfLanes], cqy[kVfLanes], cqz[kVfLanes];
   alignas(32) float im[kVfLanes];                              ///< the node's m_im
   alignas(32) float ia[kVfLanes], ib[kVfLanes], ic[kVfLanes];  ///< the corners' m_im
 };
@@ -69,6 +72,12 @@ struct RobustLanesOut {
 /// as for vfLanes. Only call when vfLanesEnabled().
 void robustLanes(const VfLanesIn& in, const float* margin, std::uint32_t lanes, float kshr0, float kshr1,
                  RobustLanesOut& out);
+
+/// Continuous's crossing test, its first part for eight lanes (robust_kernel.h's crossingRuledOut,
+/// which firstCrossing runs too, in the same operations): bit i set where the node of lane i
+/// cannot have passed through the face during the step (m_q → m_x, the corners' m_q included), so
+/// that firstCrossing would find no crossing. Only call when vfLanesEnabled().
+std::uint32_t crossingRuledOutLanes(const VfLanesIn& in);
 
 /// True when this processor runs the AVX kernel (and tests have not switched it off).
 bool vfLanesEnabled();
