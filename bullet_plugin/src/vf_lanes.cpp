@@ -169,9 +169,14 @@ PSC_AVX void projectEdge(const V3& a, const V3& b, __m256 active, V3& prj, __m25
 
 #if defined(PSC_HAVE_VF_LANES)
 // robust_kernel.h's templates over four lanes of doubles. Everything they call must be compiled
-// for AVX, the templates included: so the header is read with AVX as this region's target.
+// for AVX, the templates included: so the header is read with AVX as this region's target (GCC's
+// pragma; clang's attribute region does the same).
+#if defined(__clang__)
+#pragma clang attribute push(__attribute__((target("avx"))), apply_to = function)
+#else
 #pragma GCC push_options
 #pragma GCC target("avx")
+#endif
 namespace psc::bullet::detail {
 namespace {
 
@@ -277,7 +282,11 @@ std::uint32_t crossingRuledOutAvx(const VfLanesIn& in) {
 
 }  // namespace
 }  // namespace psc::bullet::detail
+#if defined(__clang__)
+#pragma clang attribute pop
+#else
 #pragma GCC pop_options
+#endif
 #undef PSC_AVX
 #endif
 
