@@ -53,6 +53,14 @@ template <class R>
   return (a.x * b.x + a.y * b.y) + a.z * b.z;
 }
 
+/// (wa, wb, wc) = (a, b, c) where m holds.
+template <class M, class R>
+[[gnu::always_inline]] inline void weightsWhere(M m, R a, R b, R c, R& wa, R& wb, R& wc) {
+  wa = select(m, a, wa);
+  wb = select(m, b, wb);
+  wc = select(m, c, wc);
+}
+
 /// The closest point of the triangle (a, b, c) to p, for a triangle that is not degenerate
 /// (robustDegenerate false): its weights and squared distance.
 template <class R>
@@ -90,24 +98,13 @@ template <class R>
   wb = vb * t;
   wc = vc * t;
   // Then each region from the last in Ericson's order to the first, each overriding the later ones.
-  wa = select(on_bc, zero, wa);  // edge BC
-  wb = select(on_bc, one - t, wb);
-  wc = select(on_bc, t, wc);
-  wa = select(on_ac, one - t, wa);  // edge AC
-  wb = select(on_ac, zero, wb);
-  wc = select(on_ac, t, wc);
-  wa = select(at_c, zero, wa);  // corner C
-  wb = select(at_c, zero, wb);
-  wc = select(at_c, one, wc);
-  wa = select(on_ab, one - t, wa);  // edge AB
-  wb = select(on_ab, t, wb);
-  wc = select(on_ab, zero, wc);
-  wa = select(at_b, zero, wa);  // corner B
-  wb = select(at_b, one, wb);
-  wc = select(at_b, zero, wc);
-  wa = select(at_a, one, wa);  // corner A
-  wb = select(at_a, zero, wb);
-  wc = select(at_a, zero, wc);
+  const R u = one - t;
+  weightsWhere(on_bc, zero, u, t, wa, wb, wc);        // edge BC
+  weightsWhere(on_ac, u, zero, t, wa, wb, wc);        // edge AC
+  weightsWhere(at_c, zero, zero, one, wa, wb, wc);    // corner C
+  weightsWhere(on_ab, u, t, zero, wa, wb, wc);        // edge AB
+  weightsWhere(at_b, zero, one, zero, wa, wb, wc);    // corner B
+  weightsWhere(at_a, one, zero, zero, wa, wb, wc);    // corner A
   const RobustV3<R> q{(a.x * wa + b.x * wb) + c.x * wc, (a.y * wa + b.y * wb) + c.y * wc,
                       (a.z * wa + b.z * wb) + c.z * wc};
   const RobustV3<R> d = minus(p, q);
