@@ -1,5 +1,6 @@
 // Private: the arithmetic of Robust's own contact (the exact closest point of a triangle, in
-// double, and the contact's unit normal), written once for any "real" type R: plain double in
+// double, and the contact's unit normal) and the first part of Continuous's crossing test
+// (crossingRuledOut), written once for any "real" type R: plain double in
 // exact_geometry.cpp and exact_stage.cpp, four AVX lanes of doubles in vf_lanes.cpp. Both see the
 // same operations in the same order (no FMA: the build does not enable it), so a lane's result is
 // the scalar one bit for bit; tests/bullet/exact_test.cpp (LanesAreBulletsTestBitForBit) checks it.
@@ -9,8 +10,9 @@
 // Ericson's order, is kept. Divisions of the regions not kept may give infinities or NaNs; they are
 // never selected.
 //
-// The ops R must have: + − * / between Rs, R(double) constants, sqrt(R), and the mask type
-// M = decltype(R < R) with le, ge, lt, gt, both(M, M) and select(M, R if_true, R if_false).
+// The ops R must have: + − * / between Rs, R(double) constants, sqrt(R), and a mask type M
+// returned by le, ge, lt, gt and notGreater(R, R), with both(M, M), either(M, M) and
+// select(M, R if_true, R if_false).
 //
 // Everything here has internal linkage: each including file compiles its own copy (vf_lanes.cpp
 // with AVX enabled for it), so no instantiation is shared between files built with different
