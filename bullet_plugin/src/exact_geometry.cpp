@@ -24,12 +24,11 @@ double maxEdge2(const Vec3& a, const Vec3& b, const Vec3& c) {
   return std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
 }
 
-detail::RobustV3<double> v3(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
-
 }  // namespace
 
 ClosestPoint closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const detail::RobustV3<double> pp = v3(p), aa = v3(a), bb = v3(b), cc = v3(c);
+  using detail::robustV3;
+  const detail::RobustV3<double> pp = robustV3(p), aa = robustV3(a), bb = robustV3(b), cc = robustV3(c);
   if (detail::robustDegenerate(aa, bb, cc)) {
     // Degenerate: the nearest of the three edges (a point-sized triangle gives a's distance).
     ClosestPoint best = closestOnSegment(p, a, b);
@@ -94,9 +93,10 @@ std::optional<Crossing> firstCrossing(const std::array<Vec3, 4>& start, const st
   // its coefficients, scale and rounding tolerance, and the tests that rule a crossing out, from
   // robust_kernel.h (which the exact stage's lanes run first, four pairs at a time).
   double c[4], scale = 0.0, tol = 0.0;
-  const bool ruled_out = detail::crossingRuledOut(
-      v3(start[0]), v3(start[1]), v3(start[2]), v3(start[3]), v3(end[0]), v3(end[1]), v3(end[2]), v3(end[3]), c, scale,
-      tol, kCrossingTolerance, std::numeric_limits<double>::epsilon());
+  using detail::robustV3;
+  const bool ruled_out =
+      detail::crossingRuledOut(robustV3(start[0]), robustV3(start[1]), robustV3(start[2]), robustV3(start[3]),
+                               robustV3(end[0]), robustV3(end[1]), robustV3(end[2]), robustV3(end[3]), c, scale, tol);
   if (!(scale > 0.0) || !std::isfinite(scale)) return std::nullopt;
   // Rounding of f is a few ulps of L³ (tol); Bernstein coefficients on [0, 1] beyond ±tol on one
   // side mean no root, all within ±tol coplanar all step (never changes side); and the swept

@@ -182,10 +182,10 @@ ContactKind robustContact(const PairContext& ctx, const btSoftBody::Node& node, 
   const double radius = double(m);
   if (!(cp.distance2 < radius * radius)) return ContactKind::None;
   // The same operations as detail::robustLanes (vf_lanes.cpp), which decides most such pairs.
+  using detail::robustV3;
   detail::RobustV3<double> n;
-  const bool short_away = detail::robustNormal<double>({po.x(), po.y(), po.z()}, {a.x(), a.y(), a.z()},
-                                                       {b.x(), b.y(), b.z()}, {c.x(), c.y(), c.z()}, cp.weights[0],
-                                                       cp.weights[1], cp.weights[2], radius, n);
+  const bool short_away = detail::robustNormal(robustV3(po), robustV3(a), robustV3(b), robustV3(c), cp.weights[0],
+                                               cp.weights[1], cp.weights[2], radius, n);
   const Vec3 normal = short_away ? normalWithoutDistance(node, face, cp.weights) : Vec3(n.x, n.y, n.z);
   const btVector3 w{btScalar(cp.weights[0]), btScalar(cp.weights[1]), btScalar(cp.weights[2])};
   return fillContact(ctx, node, face, w, toBt(normal), m, contact) ? ContactKind::Robust : ContactKind::None;
@@ -376,9 +376,10 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
     }
     return discreteTest(true, ctx, node, face, contact);
   };
-  std::uint32_t crossing_ruled_out = ~0u;  // per lane of the current eight; the tail: none ruled out
-  const auto finish = [&](const btSoftBody::Node& node, const btSoftBody::Face& face, ContactKind kind, int lane) {
-    if (continuous && !((crossing_ruled_out >> lane) & 1u)) kind = crossingOver(ctx, node, face, kind, contact);
+  // `may_cross`: false where the lanes ruled a crossing out (Continuous only).
+  const auto finish = [&](const btSoftBody::Node& node, const btSoftBody::Face& face, ContactKind kind,
+                          bool may_cross) {
+    if (continuous && may_cross) kind = crossingOver(ctx, node, face, kind, contact);
     take(node, kind, contact);
   };
   d::VfLanesIn in;
@@ -423,8 +424,8 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
     d::vfLanes(in, ctx.mrg, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, robust, ctx.motion_term, out);
     // Continuous: the lanes whose node cannot have passed through the face keep the discrete
     // outcome (firstCrossing would return no crossing, by the same operations).
-    crossing_ruled_out = continuous ? d::crossingRuledOutLanes(in) : ~0u;
-    if ((out.contact | out.scalar | out.robust) == 0 && (crossing_ruled_out & 0xFFu) == 0xFFu) continue;
+    const std::uint32_t crossing_ruled_out = continuous ? d::crossingRuledOutLanes(in) : 0xFFu;
+    if ((out.contact | out.scalar | out.robust) == 0 && crossing_ruled_out == 0xFFu) continue;
     if (out.robust != 0) d::robustLanes(in, out.margin, out.robust, node_body.m_cfg.kSHR, face_body.m_cfg.kSHR, rob);
     for (int l = 0; l < d::kVfLanes; ++l) {
       const std::uint32_t bit = 1u << l;
@@ -459,14 +460,13 @@ void collideInLanes(ExactTest test, const PairContext& ctx, btSoftBody& node_bod
         if (!continuous) continue;
         kind = ContactKind::Bullet;
       }
-      finish(node, face, kind, l);
+      finish(node, face, kind, (crossing_ruled_out & bit) == 0);
     }
   }
-  crossing_ruled_out = 0;
   for (; c != last; ++c) {
     const btSoftBody::Node& node = nodes[c->vertex];
     const btSoftBody::Face& face = faces[c->triangle];
-    finish(node, face, discrete(node, face), 0);
+    finish(node, face, discrete(node, face), true);
   }
 }
 

@@ -19,7 +19,10 @@
 // instruction sets.
 #pragma once
 
+#include "psc/bullet/exact.h"
+
 #include <cmath>
+#include <limits>
 
 namespace psc::bullet::detail {
 namespace {
@@ -44,6 +47,12 @@ template <class R>
 struct RobustV3 {
   R x, y, z;
 };
+
+/// Any vector with x(), y(), z() (Eigen's, Bullet's) in double.
+template <class V>
+inline RobustV3<double> robustV3(const V& v) {
+  return {double(v.x()), double(v.y()), double(v.z())};
+}
 
 template <class R>
 [[gnu::always_inline]] inline RobustV3<R> minus(const RobustV3<R>& a, const RobustV3<R>& b) {
@@ -172,7 +181,7 @@ template <class R>
 [[gnu::always_inline]] inline auto crossingRuledOut(const RobustV3<R>& p0, const RobustV3<R>& a0, const RobustV3<R>& b0,
                                                     const RobustV3<R>& c0, const RobustV3<R>& p1, const RobustV3<R>& a1,
                                                     const RobustV3<R>& b1, const RobustV3<R>& c1, R c[4], R& scale,
-                                                    R& tol, double crossing_tolerance, double epsilon) {
+                                                    R& tol) {
   const RobustV3<R> e1_0 = minus(b0, a0), e2_0 = minus(c0, a0), r_0 = minus(p0, a0);
   const RobustV3<R> e1_1 = minus(b1, a1), e2_1 = minus(c1, a1), r_1 = minus(p1, a1);
   const RobustV3<R> de1 = minus(e1_1, e1_0), de2 = minus(e2_1, e2_0), dr = minus(r_1, r_0);
@@ -186,7 +195,7 @@ template <class R>
   const R longest = larger(larger(larger(dot3(e1_0, e1_0), dot3(e2_0, e2_0)), larger(dot3(r_0, r_0), dot3(e1_1, e1_1))),
                            larger(dot3(e2_1, e2_1), dot3(r_1, r_1)));
   scale = sqrt(longest);
-  tol = R(64.0 * epsilon) * scale * scale * scale;
+  tol = R(64.0 * std::numeric_limits<double>::epsilon()) * scale * scale * scale;
   const R three(3.0), two(2.0);
   const R bern0 = c[0], bern1 = c[0] + c[1] / three, bern2 = c[0] + (two * c[1] + c[2]) / three,
           bern3 = ((c[0] + c[1]) + c[2]) + c[3];
@@ -202,7 +211,7 @@ template <class R>
   const R hi_x = larger(larger(larger(a0.x, b0.x), larger(c0.x, a1.x)), larger(b1.x, c1.x));
   const R hi_y = larger(larger(larger(a0.y, b0.y), larger(c0.y, a1.y)), larger(b1.y, c1.y));
   const R hi_z = larger(larger(larger(a0.z, b0.z), larger(c0.z, a1.z)), larger(b1.z, c1.z));
-  const R slack = R(2.0 * crossing_tolerance) * larger(larger(hi_x - lo_x, hi_y - lo_y), hi_z - lo_z);
+  const R slack = R(2.0 * kCrossingTolerance) * larger(larger(hi_x - lo_x, hi_y - lo_y), hi_z - lo_z);
   const R plo_x = smaller(p0.x, p1.x), plo_y = smaller(p0.y, p1.y), plo_z = smaller(p0.z, p1.z);
   const R phi_x = larger(p0.x, p1.x), phi_y = larger(p0.y, p1.y), phi_z = larger(p0.z, p1.z);
   out = either(out, either(either(gt(plo_x - hi_x, slack), gt(plo_y - hi_y, slack)), gt(plo_z - hi_z, slack)));

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <limits>
 
+// Before the AVX region below: robust_kernel.h includes it, and no header outside this file may be
+// compiled for AVX here (its inline functions could then be the copy another file links to).
 #include "psc/bullet/exact.h"
 
 #if defined(__x86_64__) && defined(__GNUC__)
@@ -79,6 +81,22 @@ PSC_AVX void projectEdge(const V3& a, const V3& b, __m256 active, V3& prj, __m25
   sqd = pick(sqd, l2, take);
 }
 
+/// fillContact's masses and constraint mixing at weights w: mb = BaryEval(corner m_im, w), 0 when
+/// a corner is fixed; cfm0 = ma / (ma + mb) · kshr0 and cfm1 = mb / (ma + mb) · kshr1 stored.
+/// Returns the lanes where a side can move (ma + mb > 0), which a contact needs.
+PSC_AVX __m256 contactMixing(const VfLanesIn& in, __m256 wx, __m256 wy, __m256 wz, float kshr0, float kshr1,
+                             float* cfm0, float* cfm1) {
+  const __m256 zero = _mm256_setzero_ps();
+  const __m256 ma = _mm256_load_ps(in.im);
+  const __m256 ia = _mm256_load_ps(in.ia), ib = _mm256_load_ps(in.ib), ic = _mm256_load_ps(in.ic);
+  const __m256 fixed = either(le(ia, zero), either(le(ib, zero), le(ic, zero)));
+  const __m256 mb = pick(add(add(mul(ia, wx), mul(ib, wy)), mul(ic, wz)), zero, fixed);
+  const __m256 ms = add(ma, mb);
+  _mm256_store_ps(cfm0, mul(div(ma, ms), _mm256_set1_ps(kshr0)));
+  _mm256_store_ps(cfm1, mul(div(mb, ms), _mm256_set1_ps(kshr1)));
+  return gt(ms, zero);
+}
+
 [[gnu::target("avx")]] void lanesAvx(const VfLanesIn& in, float mrg, float kshr0, float kshr1, bool robust,
                                      bool motion_term, VfLanesOut& out) {
   const __m256 zero = _mm256_setzero_ps();
@@ -129,13 +147,7 @@ PSC_AVX void projectEdge(const V3& a, const V3& b, __m256 active, V3& prj, __m25
   const __m256 isum = div(one, add(add(w0, w1), w2));
   const __m256 wx = mul(w1, isum), wy = mul(w2, isum), wz = mul(w0, isum);
 
-  // Masses: mb = BaryEval(corner m_im, w), 0 when a corner is fixed; a contact needs ma + mb > 0.
-  const __m256 ma = _mm256_load_ps(in.im);
-  const __m256 ia = _mm256_load_ps(in.ia), ib = _mm256_load_ps(in.ib), ic = _mm256_load_ps(in.ic);
-  const __m256 fixed = either(le(ia, zero), either(le(ib, zero), le(ic, zero)));
-  const __m256 mb = pick(add(add(mul(ia, wx), mul(ib, wy)), mul(ic, wz)), zero, fixed);
-  const __m256 ms = add(ma, mb);
-  const __m256 moves = gt(ms, zero);
+  const __m256 moves = contactMixing(in, wx, wy, wz, kshr0, kshr1, out.cfm0, out.cfm1);
 
   // c.m_normal = p / −btSqrt(d) = p * (1 / −btSqrt(d)).
   const V3 normal = scale(p, div(one, negate(_mm256_sqrt_ps(d))));
@@ -146,8 +158,6 @@ PSC_AVX void projectEdge(const V3& a, const V3& b, __m256 active, V3& prj, __m25
   _mm256_store_ps(out.wy, wy);
   _mm256_store_ps(out.wz, wz);
   _mm256_store_ps(out.margin, m);
-  _mm256_store_ps(out.cfm0, mul(div(ma, ms), _mm256_set1_ps(kshr0)));
-  _mm256_store_ps(out.cfm1, mul(div(mb, ms), _mm256_set1_ps(kshr1)));
 
   const __m256 scalar = butNot(accept, set);
   out.scalar = static_cast<std::uint32_t>(_mm256_movemask_ps(scalar));
@@ -242,23 +252,12 @@ void robustLanesAvx(const VfLanesIn& in, const float* margin, std::uint32_t lane
     scalar |= static_cast<std::uint32_t>(_mm256_movemask_pd(_mm256_or_pd(degenerate.m, short_away.m))) << from;
     inside |= static_cast<std::uint32_t>(_mm256_movemask_pd(within.m)) << from;
   }
-  // fillContact's masses and constraint mixing at these weights, in float, as lanesAvx has them
-  // for Bullet's weights.
-  const __m256 zero = _mm256_setzero_ps();
-  const __m256 wx = _mm256_load_ps(out.wx), wy = _mm256_load_ps(out.wy), wz = _mm256_load_ps(out.wz);
-  const __m256 ma = _mm256_load_ps(in.im);
-  const __m256 ia = _mm256_load_ps(in.ia), ib = _mm256_load_ps(in.ib), ic = _mm256_load_ps(in.ic);
-  const __m256 fixed = _mm256_or_ps(_mm256_cmp_ps(ia, zero, _CMP_LE_OQ),
-                                    _mm256_or_ps(_mm256_cmp_ps(ib, zero, _CMP_LE_OQ), _mm256_cmp_ps(ic, zero, _CMP_LE_OQ)));
-  const __m256 mb = _mm256_andnot_ps(
-      fixed, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ia, wx), _mm256_mul_ps(ib, wy)), _mm256_mul_ps(ic, wz)));
-  const __m256 ms = _mm256_add_ps(ma, mb);
-  _mm256_store_ps(out.cfm0, _mm256_mul_ps(_mm256_div_ps(ma, ms), _mm256_set1_ps(kshr0)));
-  _mm256_store_ps(out.cfm1, _mm256_mul_ps(_mm256_div_ps(mb, ms), _mm256_set1_ps(kshr1)));
-  const auto moves = static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(ms, zero, _CMP_GT_OQ)));
+  // fillContact's masses and constraint mixing at these weights, as lanesAvx has them for Bullet's.
+  const __m256 moves = contactMixing(in, _mm256_load_ps(out.wx), _mm256_load_ps(out.wy), _mm256_load_ps(out.wz),
+                                     kshr0, kshr1, out.cfm0, out.cfm1);
   out.scalar = scalar;
   out.inside = inside;
-  out.moves = moves;
+  out.moves = static_cast<std::uint32_t>(_mm256_movemask_ps(moves));
 }
 
 std::uint32_t crossingRuledOutAvx(const VfLanesIn& in) {
@@ -273,8 +272,7 @@ std::uint32_t crossingRuledOutAvx(const VfLanesIn& in) {
     const RobustV3<D4> b1{widen(in.bx, from), widen(in.by, from), widen(in.bz, from)};
     const RobustV3<D4> c1{widen(in.cx, from), widen(in.cy, from), widen(in.cz, from)};
     D4 c[4], scale, tol;
-    const M4 ruled_out = crossingRuledOut(p0, a0, b0, c0, p1, a1, b1, c1, c, scale, tol, kCrossingTolerance,
-                                          std::numeric_limits<double>::epsilon());
+    const M4 ruled_out = crossingRuledOut(p0, a0, b0, c0, p1, a1, b1, c1, c, scale, tol);
     out |= static_cast<std::uint32_t>(_mm256_movemask_pd(ruled_out.m)) << from;
   }
   return out;

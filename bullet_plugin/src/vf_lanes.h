@@ -56,10 +56,10 @@ struct VfLanesOut {
 struct RobustLanesOut {
   alignas(32) float wx[kVfLanes], wy[kVfLanes], wz[kVfLanes];  ///< the closest point's weights
   alignas(32) float nx[kVfLanes], ny[kVfLanes], nz[kVfLanes];  ///< the unit normal, face to node
+  alignas(32) float cfm0[kVfLanes], cfm1[kVfLanes];            ///< m_cfm at these weights (VfLanesOut's)
   /// Bit i: lane i needs the scalar test: its face is degenerate (reduced to its edges there), or
   /// the node lies on the face (no direction from the distance).
   std::uint32_t scalar = 0;
-  alignas(32) float cfm0[kVfLanes], cfm1[kVfLanes];  ///< m_cfm at these weights (VfLanesOut's)
   /// Bit i: the closest point lies within lane i's radius (margin[i]).
   std::uint32_t inside = 0;
   /// Bit i: a side of lane i can move (ma + mb > 0 at these weights): the contact is made.
