@@ -185,6 +185,10 @@ nlohmann::ordered_json toJson(const RunResult& r) {
     j["shared_contacts"] = r.shared_contacts;
     j["crowded_contacts"] = r.crowded_contacts;
     if (!r.pipeline_error.empty()) j["pipeline_error"] = r.pipeline_error;
+    nlohmann::ordered_json counts = nlohmann::ordered_json::object();
+    for (std::size_t k = 0; k < coreCounters().size() && k < r.core_counts_per_step.size(); ++k)
+      counts[coreCounters()[k].first] = r.core_counts_per_step[k];
+    j["core_counts_per_step"] = counts;
   }
   if (!r.flagging.empty()) j["flagging"] = r.flagging;
   j["warmup_steps"] = r.warmup;

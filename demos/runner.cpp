@@ -628,8 +628,11 @@ void summariseCounts(RunResult& r) {
   double worst_strict = 1.0, worst_full = 1.0;
   std::size_t exact_total = 0, flagged_total = 0;
   long rounds_total = 0;
+  r.core_counts_per_step.assign(coreCounters().size(), 0.0);
   for (const StepRecord& rec : r.per_step) {
     const StepCounts& n = rec.n;
+    for (std::size_t k = 0; k < coreCounters().size(); ++k)
+      r.core_counts_per_step[k] += static_cast<double>(rec.core.*coreCounters()[k].second);
     r.contacts_found_total += n.contacts_found;
     r.reduced_contacts_total += n.reduced_contacts;
     exact_total += n.exact_tests;
@@ -694,6 +697,7 @@ void summariseCounts(RunResult& r) {
   r.exact_tests_per_step = double(exact_total) / steps;
   r.flagged_pairs_per_step = double(flagged_total) / steps;
   r.rounds_per_step = double(rounds_total) / steps;
+  for (double& c : r.core_counts_per_step) c /= steps;
 }
 
 /// Times over the timed steps (after the warm-up): means, medians, maxima, and the collision

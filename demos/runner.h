@@ -135,6 +135,9 @@ struct RunResult {
   bool has_sensor_figures = false;         ///< our pipelines (sensors, bounds)
   double flagged_pairs_per_step = 0.0;
   double rounds_per_step = 0.0;
+  /// Ours: each of coreCounters() (step_record.h) summed over every step run, over the steps run
+  /// (as exact_tests_per_step), in that list's order.
+  std::vector<double> core_counts_per_step;
   std::size_t particles = 0;
   std::size_t round_cap_hits = 0;
   std::size_t repartitions = 0;

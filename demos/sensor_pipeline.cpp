@@ -84,6 +84,7 @@ void SensorPipeline::takeStep(StepRecord& record) {
   ms.candidates = s.core.ms_candidates;
   ms.repartition = s.core.ms_repartition;
   ms.core_total = s.core.ms_total;
+  record.core = s.core;
   record.error = s.error.empty() ? s.skipped_reason : s.error;
 }
 

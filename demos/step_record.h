@@ -4,8 +4,12 @@
 // from the records alone.
 #pragma once
 
+#include "psc/world.h"
+
+#include <array>
 #include <cstddef>
 #include <string>
+#include <utility>
 
 namespace psc::demo {
 
@@ -88,9 +92,50 @@ struct StepCounts {
   std::size_t cluster_contacts = 0, self_cluster_contacts = 0;
 };
 
+/// The core's counts (psc::StepStats) that the JSON reports as `core_counts_per_step`, each by its
+/// StepStats name: how many body, region and chunk pairs, gathers, probes and candidates a step
+/// took, which is what explains a stage's time. One list for the pipeline that fills them and the
+/// report that writes them.
+inline const std::array<std::pair<const char*, std::size_t psc::StepStats::*>, 28>& coreCounters() {
+  static const std::array<std::pair<const char*, std::size_t psc::StepStats::*>, 28> list = {{
+      {"particle_moves", &psc::StepStats::particle_moves},
+      {"neighbor_pairs", &psc::StepStats::neighbor_pairs},
+      {"flagged_pairs", &psc::StepStats::flagged_pairs},
+      {"flagged_by_sensors", &psc::StepStats::flagged_by_sensors},
+      {"flagged_by_bounds_only", &psc::StepStats::flagged_by_bounds_only},
+      {"body_pairs", &psc::StepStats::body_pairs},
+      {"region_pairs", &psc::StepStats::region_pairs},
+      {"region_pairs_separated", &psc::StepStats::region_pairs_separated},
+      {"chunks_in", &psc::StepStats::chunks_in},
+      {"chunks_dropped", &psc::StepStats::chunks_dropped},
+      {"chunk_pairs", &psc::StepStats::chunk_pairs},
+      {"vertices_dropped", &psc::StepStats::vertices_dropped},
+      {"candidate_vertices", &psc::StepStats::candidate_vertices},
+      {"candidate_triangles", &psc::StepStats::candidate_triangles},
+      {"candidate_probes", &psc::StepStats::candidate_probes},
+      {"candidates_beyond_reach", &psc::StepStats::candidates_beyond_reach},
+      {"nearest_seeded", &psc::StepStats::nearest_seeded},
+      {"candidates_not_nearest", &psc::StepStats::candidates_not_nearest},
+      {"candidate_pairs", &psc::StepStats::candidate_pairs},
+      {"self_region_pairs", &psc::StepStats::self_region_pairs},
+      {"self_candidate_pairs", &psc::StepStats::self_candidate_pairs},
+      {"self_excluded_pairs", &psc::StepStats::self_excluded_pairs},
+      {"self_region_pairs_unbent", &psc::StepStats::self_region_pairs_unbent},
+      {"self_chunk_pairs_unbent", &psc::StepStats::self_chunk_pairs_unbent},
+      {"self_vertices_unbent", &psc::StepStats::self_vertices_unbent},
+      {"round_cap_hits", &psc::StepStats::round_cap_hits},
+      {"repartitions", &psc::StepStats::repartitions},
+      {"bodies", &psc::StepStats::bodies},
+  }};
+  return list;
+}
+
 struct StepRecord {
   StepTimes ms;
   StepCounts n;
+  /// Ours: the core's counts of the step's sensor step (its times are in `ms`); zero for Bullet's
+  /// pipeline and in steps without one.
+  psc::StepStats core;
   double max_penetration = 0.0;  ///< length units, deepest of the penetrating vertices
   std::string error;             ///< the plugin's error or skip reason this step, if any
   std::string runaway;           ///< the first runaway pair's warning this step, if any

@@ -78,7 +78,7 @@ struct StepStats {
   int rounds = 0;                    ///< movement rounds this step (Jacobi sweeps)
   std::size_t round_cap_hits = 0;    ///< 1 when max_rounds stopped the movement before it was stable
   std::size_t particle_moves = 0;    ///< hops made, summed over particles and rounds
-  std::size_t neighbor_pairs = 0;    ///< particle pairs of different bodies within R_eff (last round)
+  std::size_t neighbor_pairs = 0;    ///< Flagging::Sensors: particle pairs of different bodies within R_eff after movement (0 otherwise)
   std::size_t flagged_pairs = 0;           ///< region pairs that reach the candidate stage
   std::size_t flagged_by_sensors = 0;      ///< Flagging::Sensors: flagged by particles within μ
   std::size_t flagged_by_bounds_only = 0;  ///< default / Bounds: flagged by the boxes (and not separated)

@@ -331,6 +331,17 @@ TEST(DemoCli, PipelineAndFlaggingChoices) {
   EXPECT_EQ(d["runs"][0].at("pipeline"), "sensors");
   EXPECT_EQ(d["runs"][1].at("pipeline"), "bullet");
   EXPECT_EQ(d["runs"][0].at("flagging"), "default");
+  // The core's counts: the bounds run is the sensors run with the sensor stage off, so the same
+  // boxes meet (body and region pairs) and nothing of the sensors' own happens; Bullet's run has none.
+  const nlohmann::json& sc = d["runs"][0].at("core_counts_per_step");
+  const nlohmann::json& bc = b["runs"][0].at("core_counts_per_step");
+  EXPECT_FALSE(d["runs"][1].contains("core_counts_per_step"));
+  EXPECT_GT(sc.at("candidate_pairs").get<double>(), 0.0);
+  EXPECT_GT(sc.at("particle_moves").get<double>(), 0.0);
+  EXPECT_EQ(sc.at("region_pairs").get<double>(), bc.at("region_pairs").get<double>());
+  EXPECT_EQ(sc.at("candidate_pairs").get<double>(), bc.at("candidate_pairs").get<double>());
+  for (const char* sensors_only : {"particle_moves", "region_pairs_separated", "chunks_dropped", "vertices_dropped"})
+    EXPECT_EQ(bc.at(sensors_only).get<double>(), 0.0) << sensors_only;
 
   // The thesis's flag-only mode reaches the core: another candidate set, so other exact tests.
   const Outcome thesis = run(scene + "--pipeline sensors --flagging thesis --json " + (dir / "thesis.json").string());
