@@ -14,6 +14,9 @@
 
 #include <BulletDynamics/Dynamics/btActionInterface.h>
 #include <sys/resource.h>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include <algorithm>
 #include <atomic>
@@ -191,6 +194,16 @@ double mean(const std::vector<double>& v) {
   double s = 0;
   for (double x : v) s += x;
   return v.empty() ? 0.0 : s / double(v.size());
+}
+
+void startFromAnEmptyHeap() {
+#if defined(__GLIBC__)
+  // mallopt with M_MMAP_THRESHOLD also turns off glibc's raising of the threshold (and of the trim
+  // threshold) to the largest block freed so far.
+  static const bool fixed = mallopt(M_MMAP_THRESHOLD, 128 * 1024) == 1;
+  (void)fixed;
+  malloc_trim(0);
+#endif
 }
 
 bool resetPeakRss() {
@@ -738,6 +751,7 @@ void summariseTimes(RunResult& r) {
 RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& opt) {
   const auto run_start = Clock::now();
   RunResult r = describeRun(scene, pipeline, opt);
+  startFromAnEmptyHeap();
   resetPeakRss();
   Run run(scene, pipeline, opt, r.has_strict, r.has_full);
   r.per_step.reserve(r.steps);
