@@ -1,0 +1,179 @@
+// psc_midphase_bench: the core's step (SensorWorld::step(): refit, particles, culls, candidates) on
+// recorded frames of a demo scene, with and without the sensor stage. A scene is simulated with
+// the plugin (Bullet's test) and every node's m_x / m_q is recorded over a window of steps in
+// contact; each benchmark then builds a core world over the same Bullet bodies (the positions read
+// in place from the 256-byte nodes, as the plugin reads them), puts each recorded frame back into
+// the nodes and times step() alone. Neither Bullet's solver nor the exact stage runs, and both
+// flaggings see the very same positions, so their difference is the sensors' own: what the
+// ablation (`psc_demo --pipeline all`, bounds / sensors) measures amid a whole simulation.
+//
+//   build/release/demos/psc_midphase_bench [--benchmark_filter=...] [--benchmark_repetitions=5]
+//
+// Counters: ms_per_step (the mean wall time of step() over the frames), candidates and probes per
+// step, and the region pairs the sensors proved apart. The frames are replayed forward, then
+// backward, so the particles track a motion that does not jump; the timing pauses only while a
+// frame is written into the nodes.
+#include "bullet_scene.h"
+#include "psc/bullet/bullet.h"
+#include "psc/world.h"
+#include "scenes.h"
+
+#include <benchmark/benchmark.h>
+
+#include <chrono>
+#include <cstdio>
+#include <exception>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace {
+
+/// Every node's (m_x, m_q) of every body at one step.
+using Frame = std::vector<std::vector<std::pair<btVector3, btVector3>>>;
+
+/// A scene simulated with the plugin, and its nodes recorded at each step of a window.
+struct Recording {
+  std::unique_ptr<psc::demo::Scene> scene;
+  std::unique_ptr<psc::demo::SceneWorld> world;
+  std::vector<Frame> frames;
+  std::vector<std::size_t> candidates;  ///< the plugin's candidate pairs at each recorded step
+  std::size_t first_step = 0;
+};
+
+Recording record(const std::string& name, std::size_t resolution, std::size_t bodies, std::size_t from,
+                 std::size_t count) {
+  Recording r;
+  psc::demo::SceneParams params;
+  params.resolution = resolution;
+  params.bodies = bodies;
+  r.scene = std::make_unique<psc::demo::Scene>(psc::demo::makeScene(name, params));
+  psc::demo::WorldOptions options;
+  options.soft_collision_flags = btSoftBody::fCollision::SDF_RS;
+  r.world = std::make_unique<psc::demo::SceneWorld>(*r.scene, options);
+  psc::bullet::Settings settings;
+  settings.opt_in = psc::bullet::OptIn::Explicit;
+  auto plugin = std::make_shared<psc::bullet::Plugin>(psc::bullet::install(r.world->world(), settings));
+  for (btSoftBody* body : r.world->softBodies()) plugin->setEnabled(body, true);
+  r.world->attach(plugin);
+  std::size_t step = 0;
+  r.first_step = from;
+  r.world->world().after_collision = [&] {
+    if (step < from) return;
+    Frame f;
+    for (btSoftBody* body : r.world->softBodies()) {
+      f.emplace_back();
+      for (int i = 0; i < body->m_nodes.size(); ++i) f.back().emplace_back(body->m_nodes[i].m_x, body->m_nodes[i].m_q);
+    }
+    r.frames.push_back(std::move(f));
+    r.candidates.push_back(plugin->sensorWorld().lastResult().candidates.size());
+  };
+  for (; step < from + count; ++step) r.world->step();
+  r.world->world().after_collision = nullptr;
+  return r;
+}
+
+void put(const Recording& r, const Frame& f) {
+  const std::vector<btSoftBody*>& bodies = r.world->softBodies();
+  for (std::size_t b = 0; b < bodies.size(); ++b)
+    for (int i = 0; i < bodies[b]->m_nodes.size(); ++i) {
+      bodies[b]->m_nodes[i].m_x = f[b][std::size_t(i)].first;
+      bodies[b]->m_nodes[i].m_q = f[b][std::size_t(i)].second;
+    }
+}
+
+/// A core world over the recording's Bullet bodies, as the plugin builds it (its default core
+/// settings, the bodies' margins, the positions read in place), with `flagging`.
+psc::SensorWorld coreWorld(const Recording& r, psc::Flagging flagging) {
+  psc::SensorSettings settings = psc::bullet::Settings{}.sensors;
+  settings.flagging = flagging;
+  psc::SensorWorld world(settings);
+  for (btSoftBody* body : r.world->softBodies()) {
+    psc::BodyDesc desc;
+    for (int f = 0; f < body->m_faces.size(); ++f) {
+      psc::Triangle t;
+      for (int k = 0; k < 3; ++k) t[std::size_t(k)] = psc::Index(body->m_faces[f].m_n[k] - &body->m_nodes[0]);
+      desc.triangles.push_back(t);
+    }
+    const std::size_t n = std::size_t(body->m_nodes.size()), stride = sizeof(btSoftBody::Node);
+    desc.positions = psc::PositionView(body->m_nodes[0].m_x.m_floats, n, stride);
+    desc.previous = psc::PositionView(body->m_nodes[0].m_q.m_floats, n, stride);
+    desc.margin = body->getCollisionShape()->getMargin();
+    world.addBody(desc);
+  }
+  return world;
+}
+
+void run(benchmark::State& state, const Recording& r, psc::Flagging flagging) {
+  psc::SensorWorld world = coreWorld(r, flagging);
+  // Forward, then backward: frame k's positions after frame k+1's are a motion of the same size.
+  std::vector<std::size_t> order;
+  for (std::size_t k = 0; k < r.frames.size(); ++k) order.push_back(k);
+  for (std::size_t k = r.frames.size(); k-- > 1;) order.push_back(k - 1);
+  // One pass untimed: partitioning, and the particles brought to the contacts.
+  for (std::size_t k : order) {
+    put(r, r.frames[k]);
+    world.step();
+  }
+  double seconds = 0.0, candidates = 0.0, probes = 0.0, separated = 0.0, steps = 0.0;
+  bool same = true;
+  for (auto _ : state) {
+    for (std::size_t k : order) {
+      state.PauseTiming();
+      put(r, r.frames[k]);
+      state.ResumeTiming();
+      const auto t0 = std::chrono::steady_clock::now();
+      const psc::StepResult& s = world.step();
+      seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      candidates += double(s.candidates.size());
+      probes += double(s.stats.candidate_probes);
+      separated += double(s.stats.region_pairs_separated);
+      steps += 1.0;
+      // The candidates do not depend on the flagging, nor on where the particles are.
+      same = same && s.candidates.size() == r.candidates[k];
+    }
+  }
+  if (!same) state.SkipWithError("the candidates differ from the plugin's at the same step");
+  state.counters["ms_per_step"] = 1e3 * seconds / steps;
+  state.counters["candidates"] = candidates / steps;
+  state.counters["probes"] = probes / steps;
+  state.counters["separated"] = separated / steps;
+}
+
+struct Case {
+  const char* label;
+  const char* scene;
+  std::size_t resolution, bodies, from, count;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  // The suite's heaviest scenes at the ablation's resolution, and the 8-tori pile of the speed target.
+  const Case cases[] = {{"mixed_pile_600", "mixed_pile", 600, 0, 100, 40},
+                        {"mesh_600", "mesh", 600, 0, 100, 40},
+                        {"tori_pile_600", "tori_pile", 600, 0, 100, 40},
+                        {"tori_pile_8x2000", "tori_pile", 2000, 8, 60, 40}};
+  std::vector<std::unique_ptr<Recording>> recordings;
+  for (const Case& k : cases) {
+    try {
+      recordings.push_back(std::make_unique<Recording>(record(k.scene, k.resolution, k.bodies, k.from, k.count)));
+    } catch (const std::exception& e) {  // e.g. the mesh scene without its default mesh file installed
+      std::fprintf(stderr, "psc_midphase_bench: %s skipped: %s\n", k.label, e.what());
+      continue;
+    }
+    const Recording& r = *recordings.back();
+    std::fprintf(stderr, "psc_midphase_bench: %s: steps %zu to %zu recorded\n", k.label, r.first_step,
+                 r.first_step + r.frames.size() - 1);
+    for (const auto& [flagging, name] : {std::pair{psc::Flagging::SensorsAndBounds, "sensors"},
+                                         std::pair{psc::Flagging::Bounds, "bounds"}})
+      benchmark::RegisterBenchmark((std::string(k.label) + "/" + name).c_str(),
+                                   [&r, flagging = flagging](benchmark::State& s) { run(s, r, flagging); })
+          ->Unit(benchmark::kMillisecond);
+  }
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}
