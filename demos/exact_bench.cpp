@@ -11,9 +11,7 @@
 // the same tests pair by pair instead of eight at a time with AVX
 // (bullet_plugin/src/vf_lanes.h): what the plugin does without AVX or in double precision.
 #include "../bullet_plugin/src/vf_lanes.h"
-#include "bullet_scene.h"
-#include "psc/bullet/bullet.h"
-#include "scenes.h"
+#include "plugin_scene.h"
 
 #include <benchmark/benchmark.h>
 
@@ -50,15 +48,10 @@ Capture capture(const std::string& name, std::size_t resolution, double scale, s
   psc::demo::SceneParams params;
   params.resolution = resolution;
   params.scale = scale;
-  c.scene = std::make_unique<psc::demo::Scene>(psc::demo::makeScene(name, params));
-  psc::demo::WorldOptions options;
-  options.soft_collision_flags = btSoftBody::fCollision::SDF_RS;
-  c.world = std::make_unique<psc::demo::SceneWorld>(*c.scene, options);
-  psc::bullet::Settings settings;
-  settings.opt_in = psc::bullet::OptIn::Explicit;
-  auto plugin = std::make_shared<psc::bullet::Plugin>(psc::bullet::install(c.world->world(), settings));
-  for (btSoftBody* body : c.world->softBodies()) plugin->setEnabled(body, true);
-  c.world->attach(plugin);
+  psc::demo::PluginScene made = psc::demo::makePluginScene(name, params);
+  c.scene = std::move(made.scene);
+  c.world = std::move(made.world);
+  const std::shared_ptr<psc::bullet::Plugin>& plugin = made.plugin;
 
   std::vector<std::vector<std::pair<btVector3, btVector3>>> best_nodes;
   std::vector<psc::CandidatePair> best_pairs;

@@ -13,10 +13,8 @@
 // step, and the region pairs the sensors proved apart. The frames are replayed forward, then
 // backward, so the particles track a motion that does not jump; the timing pauses only while a
 // frame is written into the nodes.
-#include "bullet_scene.h"
-#include "psc/bullet/bullet.h"
+#include "plugin_scene.h"
 #include "psc/world.h"
-#include "scenes.h"
 
 #include <benchmark/benchmark.h>
 
@@ -34,47 +32,34 @@ using Frame = std::vector<std::vector<std::pair<btVector3, btVector3>>>;
 
 /// A scene simulated with the plugin, and its nodes recorded at each step of a window.
 struct Recording {
-  std::unique_ptr<psc::demo::Scene> scene;
-  std::unique_ptr<psc::demo::SceneWorld> world;
+  psc::demo::PluginScene sim;
   std::vector<Frame> frames;
   std::vector<std::size_t> candidates;  ///< the plugin's candidate pairs at each recorded step
   std::size_t first_step = 0;
 };
 
-Recording record(const std::string& name, std::size_t resolution, std::size_t bodies, std::size_t from,
-                 std::size_t count) {
-  Recording r;
-  psc::demo::SceneParams params;
-  params.resolution = resolution;
-  params.bodies = bodies;
-  r.scene = std::make_unique<psc::demo::Scene>(psc::demo::makeScene(name, params));
-  psc::demo::WorldOptions options;
-  options.soft_collision_flags = btSoftBody::fCollision::SDF_RS;
-  r.world = std::make_unique<psc::demo::SceneWorld>(*r.scene, options);
-  psc::bullet::Settings settings;
-  settings.opt_in = psc::bullet::OptIn::Explicit;
-  auto plugin = std::make_shared<psc::bullet::Plugin>(psc::bullet::install(r.world->world(), settings));
-  for (btSoftBody* body : r.world->softBodies()) plugin->setEnabled(body, true);
-  r.world->attach(plugin);
+/// Steps `from` to `from + count − 1` of the scene, recorded.
+Recording record(const std::string& name, const psc::demo::SceneParams& params, std::size_t from, std::size_t count) {
+  Recording r{psc::demo::makePluginScene(name, params), {}, {}, from};
+  psc::demo::SceneWorld& world = *r.sim.world;
   std::size_t step = 0;
-  r.first_step = from;
-  r.world->world().after_collision = [&] {
+  world.world().after_collision = [&] {
     if (step < from) return;
     Frame f;
-    for (btSoftBody* body : r.world->softBodies()) {
+    for (btSoftBody* body : world.softBodies()) {
       f.emplace_back();
       for (int i = 0; i < body->m_nodes.size(); ++i) f.back().emplace_back(body->m_nodes[i].m_x, body->m_nodes[i].m_q);
     }
     r.frames.push_back(std::move(f));
-    r.candidates.push_back(plugin->sensorWorld().lastResult().candidates.size());
+    r.candidates.push_back(r.sim.plugin->sensorWorld().lastResult().candidates.size());
   };
-  for (; step < from + count; ++step) r.world->step();
-  r.world->world().after_collision = nullptr;
+  for (; step < from + count; ++step) world.step();
+  world.world().after_collision = nullptr;
   return r;
 }
 
 void put(const Recording& r, const Frame& f) {
-  const std::vector<btSoftBody*>& bodies = r.world->softBodies();
+  const std::vector<btSoftBody*>& bodies = r.sim.world->softBodies();
   for (std::size_t b = 0; b < bodies.size(); ++b)
     for (int i = 0; i < bodies[b]->m_nodes.size(); ++i) {
       bodies[b]->m_nodes[i].m_x = f[b][std::size_t(i)].first;
@@ -88,7 +73,7 @@ psc::SensorWorld coreWorld(const Recording& r, psc::Flagging flagging) {
   psc::SensorSettings settings = psc::bullet::Settings{}.sensors;
   settings.flagging = flagging;
   psc::SensorWorld world(settings);
-  for (btSoftBody* body : r.world->softBodies()) {
+  for (btSoftBody* body : r.sim.world->softBodies()) {
     psc::BodyDesc desc;
     for (int f = 0; f < body->m_faces.size(); ++f) {
       psc::Triangle t;
@@ -159,7 +144,10 @@ int main(int argc, char** argv) {
   std::vector<std::unique_ptr<Recording>> recordings;
   for (const Case& k : cases) {
     try {
-      recordings.push_back(std::make_unique<Recording>(record(k.scene, k.resolution, k.bodies, k.from, k.count)));
+      psc::demo::SceneParams params;
+      params.resolution = k.resolution;
+      params.bodies = k.bodies;
+      recordings.push_back(std::make_unique<Recording>(record(k.scene, params, k.from, k.count)));
     } catch (const std::exception& e) {  // e.g. the mesh scene without its default mesh file installed
       std::fprintf(stderr, "psc_midphase_bench: %s skipped: %s\n", k.label, e.what());
       continue;
