@@ -198,10 +198,6 @@ double mean(const std::vector<double>& v) {
 
 void startFromAnEmptyHeap() {
 #if defined(__GLIBC__)
-  // mallopt with M_MMAP_THRESHOLD also turns off glibc's raising of the threshold (and of the trim
-  // threshold) to the largest block freed so far.
-  static const bool fixed = mallopt(M_MMAP_THRESHOLD, 128 * 1024) == 1;
-  (void)fixed;
   malloc_trim(0);
 #endif
 }

@@ -200,13 +200,12 @@ struct RunResult {
 /// pipeline is unavailable (no plugin built).
 RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& options);
 
-/// Every run starts from the same heap (runPipeline calls it first): what earlier runs freed goes
-/// back to the system (glibc's malloc_trim), and glibc's mmap threshold stays at its default of
-/// 128 KiB instead of rising to the largest block freed so far. Otherwise the first run of a scene
-/// pays the page faults of its memory's growth while the later runs reuse what it left, and its
-/// peak RSS is the only one not inflated by a predecessor's: on 8 tori × 4,000 vertices the
-/// sensors run (run first) measured 27% slower than the bounds run (second) for the same work
-/// (docs/BENCHMARK.md, "Timing"). No effect outside glibc.
+/// Before each run (runPipeline calls it first): the memory earlier runs of the process freed goes
+/// back to the system (glibc's malloc_trim), so that a run's peak RSS does not hold what a
+/// predecessor left in the heap, and each run pays the page faults of its own memory's growth.
+/// It does not make the runs of one invocation equal: the first run of a scene still measures a
+/// few percent slower than the same work run after it (docs/BENCHMARK.md, "Timing"). No effect
+/// outside glibc.
 void startFromAnEmptyHeap();
 /// Peak resident set size of the process since the last reset, MB (VmHWM; getrusage fallback).
 double peakRssMb();
