@@ -196,7 +196,7 @@ double mean(const std::vector<double>& v) {
   return v.empty() ? 0.0 : s / double(v.size());
 }
 
-void startFromAnEmptyHeap() {
+void releaseFreedMemory() {
 #if defined(__GLIBC__)
   malloc_trim(0);
 #endif
@@ -747,7 +747,7 @@ void summariseTimes(RunResult& r) {
 RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& opt) {
   const auto run_start = Clock::now();
   RunResult r = describeRun(scene, pipeline, opt);
-  startFromAnEmptyHeap();
+  releaseFreedMemory();
   resetPeakRss();
   Run run(scene, pipeline, opt, r.has_strict, r.has_full);
   r.per_step.reserve(r.steps);

@@ -206,7 +206,7 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
 /// It does not make the runs of one invocation equal: the first run of a scene still measures a
 /// few percent slower than the same work run after it (docs/BENCHMARK.md, "Timing"). No effect
 /// outside glibc.
-void startFromAnEmptyHeap();
+void releaseFreedMemory();
 /// Peak resident set size of the process since the last reset, MB (VmHWM; getrusage fallback).
 double peakRssMb();
 /// Resets the peak to the current RSS where Linux allows it (/proc/self/clear_refs, "5").
