@@ -36,8 +36,7 @@ struct Group {
 
 /// A scene frozen at the moment the exact stage ran, with its candidate pairs.
 struct Capture {
-  std::unique_ptr<psc::demo::Scene> scene;
-  std::unique_ptr<psc::demo::SceneWorld> world;
+  psc::demo::PluginScene sim;
   std::vector<Group> groups;
   std::size_t tests = 0;
   std::size_t step = 0;
@@ -48,30 +47,29 @@ Capture capture(const std::string& name, std::size_t resolution, double scale, s
   psc::demo::SceneParams params;
   params.resolution = resolution;
   params.scale = scale;
-  psc::demo::PluginScene made = psc::demo::makePluginScene(name, params);
-  c.scene = std::move(made.scene);
-  c.world = std::move(made.world);
-  const std::shared_ptr<psc::bullet::Plugin>& plugin = made.plugin;
+  c.sim = psc::demo::makePluginScene(name, params);
+  psc::demo::SceneWorld& world = *c.sim.world;
+  const std::shared_ptr<psc::bullet::Plugin>& plugin = c.sim.plugin;
 
   std::vector<std::vector<std::pair<btVector3, btVector3>>> best_nodes;
   std::vector<psc::CandidatePair> best_pairs;
   std::size_t step = 0;
-  c.world->world().after_collision = [&] {
+  world.world().after_collision = [&] {
     const std::vector<psc::CandidatePair>& pairs = plugin->sensorWorld().lastResult().candidates;
     if (pairs.size() <= best_pairs.size()) return;
     best_pairs = pairs;
     c.step = step;
     best_nodes.clear();
-    for (btSoftBody* body : c.world->softBodies()) {
+    for (btSoftBody* body : world.softBodies()) {
       best_nodes.emplace_back();
       for (int i = 0; i < body->m_nodes.size(); ++i) best_nodes.back().emplace_back(body->m_nodes[i].m_x, body->m_nodes[i].m_q);
     }
   };
-  for (; step < steps; ++step) c.world->step();
-  c.world->world().after_collision = nullptr;
+  for (; step < steps; ++step) world.step();
+  world.world().after_collision = nullptr;
 
   // Back to the captured moment, and the candidates grouped by (vertex body, triangle body).
-  const std::vector<btSoftBody*>& bodies = c.world->softBodies();
+  const std::vector<btSoftBody*>& bodies = world.softBodies();
   std::map<psc::BodyId, btSoftBody*> by_id;
   for (std::size_t b = 0; b < bodies.size(); ++b) {
     for (int i = 0; i < bodies[b]->m_nodes.size(); ++i) {

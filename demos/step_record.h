@@ -96,8 +96,9 @@ struct StepCounts {
 /// StepStats name: how many body, region and chunk pairs, gathers, probes and candidates a step
 /// took, which is what explains a stage's time. One list for the pipeline that fills them and the
 /// report that writes them.
-inline const std::array<std::pair<const char*, std::size_t psc::StepStats::*>, 28>& coreCounters() {
-  static const std::array<std::pair<const char*, std::size_t psc::StepStats::*>, 28> list = {{
+using CoreCounter = std::pair<const char*, std::size_t psc::StepStats::*>;
+inline const std::array<CoreCounter, 28>& coreCounters() {
+  static const std::array<CoreCounter, 28> list = {{
       {"particle_moves", &psc::StepStats::particle_moves},
       {"neighbor_pairs", &psc::StepStats::neighbor_pairs},
       {"flagged_pairs", &psc::StepStats::flagged_pairs},
