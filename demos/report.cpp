@@ -136,6 +136,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["max_penetration"] = r.max_penetration;
   j["penetration_steps"] = r.penetration_steps;
   j["peak_rss_mb"] = r.peak_rss_mb;
+  j["peak_rss_mb_first_" + std::to_string(RunResult::kEarlySteps) + "_steps"] = r.peak_rss_mb_early;
   if (r.diverged_at_step >= 0) j["diverged_at_step"] = r.diverged_at_step;
   // Beyond the required keys: the rest of the figures (docs/BENCHMARK.md) and what explains them.
   j["scene_number"] = r.scene_number;

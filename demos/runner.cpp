@@ -762,12 +762,14 @@ RunResult runPipeline(const Scene& scene, Pipeline pipeline, const RunOptions& o
     }
     run.measureAfterStep(rec, opt.penetration);
     if (run.writesFrame(step)) run.writeFrame(step);
+    if (step + 1 == RunResult::kEarlySteps) r.peak_rss_mb_early = peakRssMb();
   }
   run.finish();
   summariseCounts(r);
   summariseTimes(r);
   r.midphase_bytes_per_vertex = run.midphaseBytesPerVertex(r.vertices);
   r.peak_rss_mb = peakRssMb();
+  if (r.steps < RunResult::kEarlySteps) r.peak_rss_mb_early = r.peak_rss_mb;
   r.wall_seconds = msSince(run_start) / 1000.0;
   return r;
 }

@@ -188,6 +188,10 @@ struct RunResult {
   /// extents): the simulation blew up and the run stopped there; -1 = it did not.
   long diverged_at_step = -1;
   double peak_rss_mb = 0.0;
+  /// Peak RSS over the first kEarlySteps steps (the whole run when it is shorter), MB: what a long
+  /// run's peak is compared with (a run whose memory keeps growing with its contacts shows here).
+  double peak_rss_mb_early = 0.0;
+  static constexpr std::size_t kEarlySteps = 50;
   double midphase_bytes_per_vertex = 0.0;
   /// Collision ms means of the runs of the same job, filled by the suite when both ran (0 = not).
   double ratio_bullet_over_sensors = 0.0, ratio_bullet_over_bounds = 0.0, ratio_bounds_over_sensors = 0.0;

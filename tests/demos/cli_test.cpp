@@ -50,6 +50,19 @@ nlohmann::json readJson(const fs::path& path) {
 
 double num(const nlohmann::json& run, const char* key) { return run.at(key).get<double>(); }
 
+TEST(DemoCli, TheEarlyPeakMemoryIsTakenAfterFiftySteps) {
+  const fs::path dir = scratch("early_rss");
+  const Outcome o = run("--scene head_on --resolution 100 --steps 60 --pipeline both --truth none --json " +
+                        (dir / "r.json").string());
+  ASSERT_TRUE(o.exited && o.code == 0) << o.output;
+  const nlohmann::json doc = readJson(dir / "r.json");
+  for (const nlohmann::json& r : doc.at("runs")) {
+    const std::string pipeline = r.at("pipeline").get<std::string>();
+    EXPECT_GT(num(r, "peak_rss_mb_first_50_steps"), 0.0) << pipeline;
+    EXPECT_LE(num(r, "peak_rss_mb_first_50_steps"), num(r, "peak_rss_mb")) << pipeline;
+  }
+}
+
 TEST(DemoCli, JsonAndCsvHaveTheAgreedKeys) {
   // Head-on spheres at 100 vertices touch from about step 20: 40 steps, all three pipelines.
   const fs::path dir = scratch("json");
@@ -85,6 +98,8 @@ TEST(DemoCli, JsonAndCsvHaveTheAgreedKeys) {
     for (const char* key : timing) ASSERT_TRUE(r.contains(key)) << pipeline << " run lacks '" << key << "'";
     EXPECT_EQ(r.at("scene").get<std::string>(), "head_on");
     EXPECT_EQ(r.at("steps").get<int>(), 40);
+    // Shorter than 50 steps: the early peak is the run's.
+    EXPECT_EQ(num(r, "peak_rss_mb_first_50_steps"), num(r, "peak_rss_mb")) << pipeline;
     // The crossing counts are there for every pipeline, truth or not, and consistent.
     EXPECT_LE(r.at("intersections_steps").get<int>(), 40) << pipeline;
     EXPECT_EQ(r.at("intersections_max").get<int>() > 0, r.at("intersections_steps").get<int>() > 0) << pipeline;
