@@ -179,6 +179,72 @@ TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
   }
 }
 
+// The rest-shape bound's part of the refit (self-collision, RestFit in src/body.h) on Bullet-like
+// single-precision records: the AVX2 pass (streamBoxesFloatRestFit) and the generic one
+// (RestFitPass, what runs without AVX2) must give the same bits for everything the bound reads:
+// the y-boxes, the displacement boxes, the sums of the fit and so the rotations, over two steps
+// of a turned, jittered torus (the second step with the rotations fitted in the first). The chunk
+// boxes are the same; their motion is the fast pass's single-precision one, raised by up to 1e-6
+// relative and never below. Slots of one and two bytes, vertices of two regions.
+TEST(ForeignChunks, RestFitPassGivesTheSameBitsWithAndWithoutAvx2) {
+  if (!avx2ProbesAvailable()) GTEST_SKIP() << "no AVX2 on this processor: only the generic pass runs";
+  for (const std::size_t resolution : {2000u, 20000u}) {
+    const TriMesh m = makeTorus(1.0, 0.3, resolution);
+    const std::size_t n = m.vertices.size();
+    const MeshTopology topo(m.triangles, n);
+    std::vector<Index> region_of(n);
+    for (std::size_t v = 0; v < n; ++v) region_of[v] = m.vertices[v].x() < 0.0 ? 0 : 1;
+    const Eigen::Matrix3d turn[2] = {Eigen::AngleAxisd(0.4, Vec3(1, 2, 3).normalized()).toRotationMatrix(),
+                                     Eigen::AngleAxisd(0.45, Vec3(1, 2, 2.5).normalized()).toRotationMatrix()};
+    std::vector<std::array<float, 8>> records[2];
+    for (int step = 0; step < 2; ++step) {
+      TriMesh moved = m;
+      for (Vec3& p : moved.vertices) p = turn[step] * p + Vec3(0.3, -1.0, 0.2 * step);
+      std::vector<Vec3> x, q;
+      records[step] = jitteredRecords(moved, 3 + step, 0.01, x, q);
+    }
+    Body bodies[2];
+    for (int avx2 = 0; avx2 < 2; ++avx2) {
+      allowAvx2Probes(avx2 == 1);
+      Body& b = bodies[avx2];
+      b.rest = m.vertices;
+      b.rest_mean_edge = 0.05;
+      b.chunks = buildChunks(topo, PositionView::of(m.vertices), region_of, 2, 32);
+      b.particle_vertex = {0, 1};
+      for (const std::vector<std::array<float, 8>>& f : records) {
+        b.positions = PositionView(f[0].data(), n, sizeof f[0]);
+        b.previous = PositionView(f[0].data() + 4, n, sizeof f[0]);
+        refitBounds(b, false, false, true);
+      }
+    }
+    allowAvx2Probes(true);
+    const Body& wide = bodies[1];
+    const Body& narrow = bodies[0];
+    ASSERT_TRUE(wide.rest_fit && narrow.rest_fit);
+    const RestFit& a = *wide.rest_fit;
+    const RestFit& g = *narrow.rest_fit;
+    ASSERT_TRUE(a.filled && g.filled);
+    EXPECT_EQ(wide.chunks.foreign.slotWidth(), wide.chunks.count() < 256 ? 1u : 2u);
+    EXPECT_TRUE(a.chunk_lo == g.chunk_lo && a.chunk_hi == g.chunk_hi) << resolution;
+    EXPECT_TRUE(a.move_lo == g.move_lo && a.move_hi == g.move_hi) << resolution;
+    EXPECT_TRUE(a.region_sum_x == g.region_sum_x && a.region_xr == g.region_xr) << resolution;
+    EXPECT_TRUE(a.sum_motion == g.sum_motion && a.moved == g.moved && a.mean_motion == g.mean_motion) << resolution;
+    EXPECT_TRUE(a.rot == g.rot && a.next_rot == g.next_rot) << resolution;
+    EXPECT_TRUE(a.chunk_center == g.chunk_center && a.chunk_half == g.chunk_half) << resolution;
+    EXPECT_FALSE(g.rot[0].isIdentity(1e-3)) << "the fit follows the turn";
+    ASSERT_EQ(wide.chunk_box.size(), narrow.chunk_box.size());
+    std::size_t differ = 0, motion_out = 0;
+    for (std::size_t c = 0; c < wide.chunk_box.size(); ++c) {
+      const MotionBox& w = wide.chunk_box[c];
+      const MotionBox& o = narrow.chunk_box[c];
+      differ += w.lo != o.lo || w.hi != o.hi;
+      motion_out += w.motion < o.motion || w.motion > o.motion * (1.0 + 1e-6);
+    }
+    EXPECT_EQ(differ, 0u) << resolution;
+    EXPECT_EQ(motion_out, 0u) << resolution;
+  }
+}
+
 // The repartition check's measures from the refit's pass (measure = true): each region's area is
 // the sum of its chunks' triangle areas and max_edge the longest triangle edge, against Eigen's
 // own cross products and norms on the positions as read (a relative 1e-12 for the sums, whose
