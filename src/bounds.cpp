@@ -193,6 +193,65 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
 }
 
 #if defined(__SSE2__)
+// The packed single-precision pass's pieces, shared by streamBoxesFloat and (with AVX2)
+// streamBoxesFloatRestFit. Per chunk, lo = (x, y, z, 0) and hi = (x, y, z, squared motion of its
+// own vertices); one more box past the last takes what empty foreign slots name and is thrown away.
+// __m128's alignment attribute is not part of the vector's type: std::array and std::vector align by
+// alignof, which malloc's 16 bytes meet.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wignored-attributes"
+using PackedBox = std::array<__m128, 2>;
+#pragma GCC diagnostic pop
+
+inline PackedBox emptyPackedBox() {
+  const float inf = std::numeric_limits<float>::infinity();
+  return {_mm_set1_ps(inf), _mm_setr_ps(-inf, -inf, -inf, 0.0f)};
+}
+
+/// (x, y, z, 0) from three floats, without reading past z (the view's records may end right after
+/// it); x and y by one 8-byte load, since positions are only 4-byte aligned.
+[[gnu::always_inline]] inline __m128 loadPoint(const float* at) {
+  double xy;
+  std::memcpy(&xy, at, sizeof xy);
+  return _mm_movelh_ps(_mm_castpd_ps(_mm_set_sd(xy)), _mm_load_ss(at + 2));
+}
+
+[[gnu::always_inline]] inline void growPacked(PackedBox& box, __m128 lo, __m128 hi) {
+  box[0] = _mm_min_ps(box[0], lo);
+  box[1] = _mm_max_ps(box[1], hi);
+}
+
+/// (x, y, z, |x − q|²) from x = (x, y, z, 0) and q likewise, the squared motion in single precision.
+[[gnu::always_inline]] inline __m128 withMotion(__m128 xv, __m128 qv) {
+  const __m128 d = _mm_sub_ps(xv, qv);
+  const __m128 d2 = _mm_mul_ps(d, d);
+  const __m128 m2 = _mm_add_ss(_mm_add_ss(d2, _mm_shuffle_ps(d2, d2, 1)), _mm_movehl_ps(d2, d2));
+  return _mm_movelh_ps(xv, _mm_unpacklo_ps(_mm_movehl_ps(xv, xv), m2));
+}
+
+/// Whether the previous positions need prefetches of their own: another stride, or records a cache
+/// line or more away from the current ones (otherwise one prefetch brings both).
+inline bool prefetchApart(const char* base, std::size_t stride, const char* prev, std::size_t prev_stride) {
+  if (prev == nullptr) return false;
+  const auto at = reinterpret_cast<std::uintptr_t>(base), before = reinterpret_cast<std::uintptr_t>(prev);
+  return prev_stride != stride || (before > at ? before - at : at - before) >= 64;
+}
+
+/// The packed boxes into `boxes`; each squared motion, rounded in single precision (a few ulps,
+/// < 1e-6 relative), is raised by 1e-6 so that it never falls below the double value, and added to
+/// `sum` (squared until the end of the pass).
+inline void unpackBoxes(const PackedBox* box, std::size_t chunks, std::vector<MotionBox>& boxes, double& sum) {
+  for (std::size_t c = 0; c < chunks; ++c) {
+    alignas(16) float l[4], h[4];
+    _mm_store_ps(l, box[c][0]);
+    _mm_store_ps(h, box[c][1]);
+    boxes[c].lo = Vec3(l[0], l[1], l[2]);
+    boxes[c].hi = Vec3(h[0], h[1], h[2]);
+    boxes[c].motion = static_cast<double>(h[3]) * (1.0 + 1e-6);
+    sum += boxes[c].motion;
+  }
+}
+
 /// streamBoxes for the common step: single-precision positions, the radius bound and no rest fit
 /// (Bullet's nodes); with `copy`, the packed copy of the positions as streamBoxes makes it.
 /// Everything stays in single precision, four lanes (x, y, z, 0): the boxes are the same values as
@@ -212,78 +271,40 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
                       std::size_t prev_stride, std::vector<MotionBox>& boxes, double& sum, float* copy) {
   const std::size_t n = ch.chunk_of.size(), chunks = ch.count();
   const std::uint8_t* slots = ch.foreign.slotData();
-  // Per chunk, lo = (x, y, z, 0) and hi = (x, y, z, squared motion of its own vertices).
-  // __m128's alignment attribute is not part of the vector's type: its allocator aligns by alignof.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wignored-attributes"
-  thread_local std::vector<std::array<__m128, 2>> box;
-#pragma GCC diagnostic pop
-  const float inf = std::numeric_limits<float>::infinity();
-  box.assign(chunks + 1, {_mm_set1_ps(inf), _mm_setr_ps(-inf, -inf, -inf, 0.0f)});
-  // The same stride and records less than a cache line apart: one prefetch brings both.
-  const auto address = [](const char* at) { return reinterpret_cast<std::uintptr_t>(at); };
-  const bool prev_apart = prev != nullptr && (prev_stride != stride || (address(prev) > address(base)
-                                                                             ? address(prev) - address(base)
-                                                                             : address(base) - address(prev)) >= 64);
-  // Two floats (x, y) into the low lanes: positions are only 4-byte aligned, so no double load.
-  const auto load2 = [](const float* at) {
-    double xy;
-    std::memcpy(&xy, at, sizeof xy);
-    return _mm_castpd_ps(_mm_set_sd(xy));
-  };
+  thread_local std::vector<PackedBox> box;
+  box.assign(chunks + 1, emptyPackedBox());
+  const bool prev_apart = prefetchApart(base, stride, prev, prev_stride);
   __m128 nan = _mm_setzero_ps();
   for (std::size_t v = 0; v < n; ++v) {
     __builtin_prefetch(base + (v + 24) * stride);
     if (prev_apart) __builtin_prefetch(prev + (v + 24) * prev_stride);
     const Index c = ch.chunk_of[v];
     if (c == kInvalidIndex) continue;
-    // x, y and z without reading past them (the view's records may end right after z).
     const float* p = reinterpret_cast<const float*>(base + v * stride);
     if (copy != nullptr) std::memcpy(copy + 3 * v, p, 3 * sizeof(float));
-    const __m128 xy = load2(p);
-    const __m128 z = _mm_load_ss(p + 2);
-    const __m128 xv = _mm_movelh_ps(xy, z);  // (x, y, z, 0)
+    const __m128 xv = loadPoint(p);  // (x, y, z, 0)
     nan = _mm_or_ps(nan, _mm_cmpunord_ps(xv, xv));
     __m128 xm = xv;
     if (prev != nullptr) {
-      const float* q = reinterpret_cast<const float*>(prev + v * prev_stride);
-      const __m128 qv = _mm_movelh_ps(load2(q), _mm_load_ss(q + 2));
+      const __m128 qv = loadPoint(reinterpret_cast<const float*>(prev + v * prev_stride));
       nan = _mm_or_ps(nan, _mm_cmpunord_ps(qv, qv));
-      const __m128 d = _mm_sub_ps(xv, qv);
-      const __m128 d2 = _mm_mul_ps(d, d);
-      const __m128 m2 = _mm_add_ss(_mm_add_ss(d2, _mm_shuffle_ps(d2, d2, 1)), _mm_movehl_ps(d2, d2));
-      xm = _mm_movelh_ps(xy, _mm_unpacklo_ps(z, m2));  // (x, y, z, m2)
+      xm = withMotion(xv, qv);  // (x, y, z, m2)
     }
-    box[c][0] = _mm_min_ps(box[c][0], xv);
-    box[c][1] = _mm_max_ps(box[c][1], xm);
+    growPacked(box[c], xv, xm);
     Slot f[2];
     std::memcpy(f, slots + 2 * sizeof(Slot) * v, sizeof f);
-    box[f[0]][0] = _mm_min_ps(box[f[0]][0], xv);
-    box[f[0]][1] = _mm_max_ps(box[f[0]][1], xv);  // lane 3: 0, the motion stays the own vertices'
-    box[f[1]][0] = _mm_min_ps(box[f[1]][0], xv);
-    box[f[1]][1] = _mm_max_ps(box[f[1]][1], xv);
+    growPacked(box[f[0]], xv, xv);  // lane 3: 0, the motion stays the own vertices'
+    growPacked(box[f[1]], xv, xv);
   }
   // The rare third and later foreign chunks of a vertex.
   for (const auto& [v, f] : ch.foreign.extra()) {
-    const float* p = reinterpret_cast<const float*>(base + std::size_t{v} * stride);
-    const __m128 xv = _mm_movelh_ps(load2(p), _mm_load_ss(p + 2));
-    box[f][0] = _mm_min_ps(box[f][0], xv);
-    box[f][1] = _mm_max_ps(box[f][1], xv);
+    const __m128 xv = loadPoint(reinterpret_cast<const float*>(base + std::size_t{v} * stride));
+    growPacked(box[f], xv, xv);
   }
   // A NaN coordinate, or an infinite one (in a box or, through the motion, in the previous
   // positions), makes the sum non-finite: the caller then names it.
   if (_mm_movemask_ps(nan) != 0) sum += std::numeric_limits<double>::quiet_NaN();
-  for (std::size_t c = 0; c < chunks; ++c) {
-    alignas(16) float l[4], h[4];
-    _mm_store_ps(l, box[c][0]);
-    _mm_store_ps(h, box[c][1]);
-    boxes[c].lo = Vec3(l[0], l[1], l[2]);
-    boxes[c].hi = Vec3(h[0], h[1], h[2]);
-    // Squared until the end of the pass. Rounded in single precision (a few ulps, < 1e-6
-    // relative): raised by 1e-6 so that it never falls below the double value.
-    boxes[c].motion = static_cast<double>(h[3]) * (1.0 + 1e-6);
-    sum += boxes[c].motion;
-  }
+  unpackBoxes(box.data(), chunks, boxes, sum);
 }
 #endif
 
@@ -387,10 +408,6 @@ bool useAvx2Probes() { return g_avx2_allowed.load(std::memory_order_relaxed) && 
   }
 }
 
-// __m256d's alignment attribute is not part of the vector's type; std::vector and std::array align
-// by alignof, which is 32.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wignored-attributes"
 /// Four and three AVX registers' worth of doubles, aligned as a register (a std::vector of
 /// std::array<__m256d, N> would be aligned by malloc's 16 bytes: the attribute is dropped there).
 struct alignas(32) Lanes4 {
@@ -454,31 +471,26 @@ template <typename Slot>
                                                      const std::vector<Vec3>& rest) {
   const std::size_t n = ch.chunk_of.size(), chunks = ch.count(), regions = f.rot.size();
   const std::uint8_t* slots = ch.foreign.slotData();
-  thread_local std::vector<std::array<__m128, 2>> box;
-  // Per chunk (and the thrown-away one past the last, which empty slots name): the y-box (lo, hi)
-  // and the box of its own vertices' displacements (lo, hi), lane 3 unused; per region R's columns.
+  // Per chunk (and the thrown-away one past the last, which empty slots name): the packed boxes,
+  // and in double the y-box (lo, hi) and the box of its own vertices' displacements (lo, hi),
+  // lane 3 unused; per region R's columns.
+  thread_local std::vector<PackedBox> box;
   thread_local std::vector<Lanes4> ybox;
   thread_local std::vector<Lanes3> cols;
-  thread_local std::vector<Index> region_of;
-  const float inf = std::numeric_limits<float>::infinity();
   const __m256d dinf = _mm256_set1_pd(std::numeric_limits<double>::infinity());
   const __m256d ninf = _mm256_set1_pd(-std::numeric_limits<double>::infinity());
-  box.assign(chunks + 1, {_mm_set1_ps(inf), _mm_setr_ps(-inf, -inf, -inf, 0.0f)});
+  box.assign(chunks + 1, emptyPackedBox());
   ybox.assign(chunks + 1, Lanes4{{dinf, ninf, dinf, ninf}});
-  region_of.assign(ch.region_of.begin(), ch.region_of.end());
-  region_of.push_back(0);
   cols.resize(regions);
   for (std::size_t r = 0; r < regions; ++r)
     for (int j = 0; j < 3; ++j) cols[r].v[j] = _mm256_setr_pd(f.rot[r](0, j), f.rot[r](1, j), f.rot[r](2, j), 0.0);
-  const auto address = [](const char* at) { return reinterpret_cast<std::uintptr_t>(at); };
-  const bool prev_apart = prev_stride != stride || (address(prev) > address(base) ? address(prev) - address(base)
-                                                                                    : address(base) - address(prev)) >= 64;
+  const bool prev_apart = prefetchApart(base, stride, prev, prev_stride);
   // Raw pointers: the intrinsics' vector types may alias anything, so the vectors' own data
   // pointers would otherwise be read again after every store.
-  std::array<__m128, 2>* const bx = box.data();
+  PackedBox* const bx = box.data();
   Lanes4* const yb = ybox.data();
   const Lanes3* const rc = cols.data();
-  const Index* const reg = region_of.data();
+  const Index* const region_of = ch.region_of.data();
   const Index* const chunk_of = ch.chunk_of.data();
   const Vec3* const rest_at = rest.data();
   RestRunAvx2 run;
@@ -492,31 +504,19 @@ template <typename Slot>
     if (c == kInvalidIndex) continue;
     const float* p = reinterpret_cast<const float*>(base + v * stride);
     if (copy != nullptr) std::memcpy(copy + 3 * v, p, 3 * sizeof(float));
-    double xy_bits;
-    std::memcpy(&xy_bits, p, sizeof xy_bits);
-    const __m128 xy = _mm_castpd_ps(_mm_set_sd(xy_bits));
-    const __m128 z = _mm_load_ss(p + 2);
-    const __m128 xv = _mm_movelh_ps(xy, z);  // (x, y, z, 0)
+    const __m128 xv = loadPoint(p);  // (x, y, z, 0)
     nan = _mm_or_ps(nan, _mm_cmpunord_ps(xv, xv));
-    const float* q = reinterpret_cast<const float*>(prev + v * prev_stride);
-    std::memcpy(&xy_bits, q, sizeof xy_bits);
-    const __m128 qv = _mm_movelh_ps(_mm_castpd_ps(_mm_set_sd(xy_bits)), _mm_load_ss(q + 2));
+    const __m128 qv = loadPoint(reinterpret_cast<const float*>(prev + v * prev_stride));
     nan = _mm_or_ps(nan, _mm_cmpunord_ps(qv, qv));
-    const __m128 d = _mm_sub_ps(xv, qv);
-    const __m128 d2 = _mm_mul_ps(d, d);
-    const __m128 m2 = _mm_add_ss(_mm_add_ss(d2, _mm_shuffle_ps(d2, d2, 1)), _mm_movehl_ps(d2, d2));
-    bx[c][0] = _mm_min_ps(bx[c][0], xv);
-    bx[c][1] = _mm_max_ps(bx[c][1], _mm_movelh_ps(xy, _mm_unpacklo_ps(z, m2)));
+    growPacked(bx[c], xv, withMotion(xv, qv));
     Slot fs[2];
     std::memcpy(fs, slots + 2 * sizeof(Slot) * v, sizeof fs);
-    bx[fs[0]][0] = _mm_min_ps(bx[fs[0]][0], xv);
-    bx[fs[0]][1] = _mm_max_ps(bx[fs[0]][1], xv);
-    bx[fs[1]][0] = _mm_min_ps(bx[fs[1]][0], xv);
-    bx[fs[1]][1] = _mm_max_ps(bx[fs[1]][1], xv);
+    growPacked(bx[fs[0]], xv, xv);
+    growPacked(bx[fs[1]], xv, xv);
     // The rest fit in double: x, q and d = x − q exactly (a difference of two floats fits).
     const __m256d x4 = _mm256_cvtps_pd(xv);
     const __m256d d4 = _mm256_sub_pd(x4, _mm256_cvtps_pd(qv));
-    const Index r = reg[c];
+    const Index r = region_of[c];
     if (r != run_region) {
       flushRun(f, run_region, run);
       run_region = r;
@@ -535,7 +535,8 @@ template <typename Slot>
     run.xr[1] = _mm256_add_pd(run.xr[1], _mm256_mul_pd(x4, _mm256_broadcast_sd(rp + 1)));
     run.xr[2] = _mm256_add_pd(run.xr[2], _mm256_mul_pd(x4, _mm256_broadcast_sd(rp + 2)));
     for (const Slot s : fs) {
-      const Index rf = reg[s];
+      // The thrown-away box past the last chunk takes any rotation: the vertex's own.
+      const Index rf = s < chunks ? region_of[s] : r;
       __m256d yf = y4;
       if (__builtin_expect(rf != r, 0)) yf = restOffset(rc[rf].v, x4, rp);
       yb[s].v[0] = _mm256_min_pd(yb[s].v[0], yf);
@@ -545,35 +546,23 @@ template <typename Slot>
   flushRun(f, run_region, run);
   // The rare third and later foreign chunks of a vertex.
   for (const auto& [v, fc] : ch.foreign.extra()) {
-    const float* p = reinterpret_cast<const float*>(base + std::size_t{v} * stride);
-    double xy_bits;
-    std::memcpy(&xy_bits, p, sizeof xy_bits);
-    const __m128 xv = _mm_movelh_ps(_mm_castpd_ps(_mm_set_sd(xy_bits)), _mm_load_ss(p + 2));
-    box[fc][0] = _mm_min_ps(box[fc][0], xv);
-    box[fc][1] = _mm_max_ps(box[fc][1], xv);
-    const __m256d yf = restOffset(cols[region_of[fc]].v, _mm256_cvtps_pd(xv), rest[v].data());
-    ybox[fc].v[0] = _mm256_min_pd(ybox[fc].v[0], yf);
-    ybox[fc].v[1] = _mm256_max_pd(ybox[fc].v[1], yf);
+    const __m128 xv = loadPoint(reinterpret_cast<const float*>(base + std::size_t{v} * stride));
+    growPacked(bx[fc], xv, xv);
+    const __m256d yf = restOffset(rc[region_of[fc]].v, _mm256_cvtps_pd(xv), rest_at[v].data());
+    yb[fc].v[0] = _mm256_min_pd(yb[fc].v[0], yf);
+    yb[fc].v[1] = _mm256_max_pd(yb[fc].v[1], yf);
   }
   if (_mm_movemask_ps(nan) != 0) sum += std::numeric_limits<double>::quiet_NaN();
+  unpackBoxes(bx, chunks, boxes, sum);
   for (std::size_t c = 0; c < chunks; ++c) {
-    alignas(16) float l[4], h[4];
-    _mm_store_ps(l, box[c][0]);
-    _mm_store_ps(h, box[c][1]);
-    boxes[c].lo = Vec3(l[0], l[1], l[2]);
-    boxes[c].hi = Vec3(h[0], h[1], h[2]);
-    // As streamBoxesFloat: squared, rounded in single precision and raised by 1e-6.
-    boxes[c].motion = static_cast<double>(h[3]) * (1.0 + 1e-6);
-    sum += boxes[c].motion;
     alignas(32) double a[4];
     Vec3* const into[4] = {&f.chunk_lo[c], &f.chunk_hi[c], &f.move_lo[c], &f.move_hi[c]};
     for (int k = 0; k < 4; ++k) {
-      _mm256_store_pd(a, ybox[c].v[k]);
+      _mm256_store_pd(a, yb[c].v[k]);
       *into[k] = Vec3(a[0], a[1], a[2]);
     }
   }
 }
-#pragma GCC diagnostic pop
 
 #endif
 
