@@ -230,7 +230,8 @@ inline PackedBox emptyPackedBox() {
 }
 
 /// Whether the previous positions need prefetches of their own: another stride, or records a cache
-/// line or more away from the current ones (otherwise one prefetch brings both).
+/// line or more away from the current ones (otherwise one prefetch brings both, or the line after
+/// it, which the hardware fetches with it: see streamBoxesFloat).
 inline bool prefetchApart(const char* base, std::size_t stride, const char* prev, std::size_t prev_stride) {
   if (prev == nullptr) return false;
   const auto at = reinterpret_cast<std::uintptr_t>(base), before = reinterpret_cast<std::uintptr_t>(prev);
@@ -260,7 +261,10 @@ inline void unpackBoxes(const PackedBox* box, std::size_t chunks, std::vector<Mo
 /// unordered compare, an infinity by the boxes' or the motion's check.
 /// On 8 tori × 50,000 vertices the refit went from 3.42 to 3.16 ms a step with the boxes alone
 /// packed, to about 3.06 ms with the motion too, and to 2.90–2.94 with the motion carried in the
-/// upper box's fourth lane and one prefetch for Bullet's node (m_x and m_q share a cache line)
+/// upper box's fourth lane and one prefetch for Bullet's node (m_x and m_q are 16 bytes apart; in
+/// a large node array, which Bullet's allocator starts 32 bytes into a line, they lie in two lines,
+/// and the hardware's prefetchers bring the second: a prefetch of it measured no difference,
+/// docs/DECISIONS.md "Stop 33")
 /// (psc_demo --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors
 /// --truth none, refit_ms_mean, two or three alternating runs each).
 /// `Slot`: the type of ChunkLists::foreign's slots (its slotWidth() bytes). Each vertex updates the

@@ -721,6 +721,52 @@ TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
   EXPECT_LT(candidates_swept, candidates_radius / 2) << "swept " << candidates_swept << ", radius " << candidates_radius;
 }
 
+// The sensor stage where the candidate stage ends with boxes, not with the exact distance: with
+// MotionBound::Swept a pair whose boxes meet is a candidate (it may meet during the step), so what
+// the sensor axis drops (a vertex beyond the triangle chunk's extent along it, a pair whose extents
+// along it lie apart) never reaches the exact test. Same scene as above, both flagging modes: each
+// keeps every pair that meets during the step (the 65-time brute force), and the sensors hand over
+// strictly fewer pairs than the boxes alone. (With MotionBound::Radius both end with the exact
+// distance and hand over the same pairs: SensorDecision.ObliqueCurvedContactSameCandidatesFewerProbes.)
+TEST(HardConditions, SweptBoundTheSensorsHandOverFewerPairsThanTheBoxesAlone) {
+  FlyingBall fly(11, 0.03, 0.1, Vec3(-2.5, -1.0, 1.2), Vec3(0.9, 0.5, -0.35));
+  std::vector<Body>& bodies = fly.bodies;
+  SensorSettings sensors_settings, bounds_settings;
+  sensors_settings.motion_bound = bounds_settings.motion_bound = MotionBound::Swept;
+  bounds_settings.flagging = Flagging::Bounds;
+  SensorWorld sensors(sensors_settings), bounds(bounds_settings);
+  addAll(sensors, bodies);
+  for (Body& b : bodies) ASSERT_EQ(bounds.addBody(descOf(b)), b.id);
+  std::size_t met = 0, by_sensors = 0, by_bounds = 0, dropped = 0;
+  for (int step = 1; step <= 6; ++step) {
+    fly.moveTo(step, {&sensors, &bounds});
+    for (SensorWorld* w : {&sensors, &bounds}) {
+      const StepResult& res = w->step();
+      std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
+      for (const CandidatePair& c : res.candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+      (w == &sensors ? by_sensors : by_bounds) += res.candidates.size();
+      if (w == &sensors) dropped += res.stats.vertices_dropped + res.stats.chunks_dropped;
+      const double r = bodies[0].margin + bodies[1].margin;
+      for (int i = 0; i < 2; ++i) {
+        const Body &a = bodies[i], &b = bodies[1 - i];
+        for (Index v = 0; v < a.mesh.vertices.size(); ++v)
+          for (Index t = 0; t < b.mesh.triangles.size(); ++t) {
+            if (!meetsDuringStep(a, v, b, b.mesh.triangles[t], r)) continue;
+            met += w == &sensors;
+            EXPECT_EQ(cand.count({a.id, v, b.id, t}), 1u) << (w == &sensors ? "sensors" : "bounds") << ", step " << step
+                                                            << ": " << a.name << " vertex " << v << " meets " << b.name
+                                                            << " triangle " << t;
+          }
+      }
+    }
+  }
+  std::cout << "[ swept ] pairs that meet " << met << "; candidates: sensors " << by_sensors << ", bounds " << by_bounds
+            << "; vertices and chunks the slab dropped " << dropped << "\n";
+  EXPECT_GT(met, 50u) << "the ball must cross the sheet";
+  EXPECT_GT(dropped, 0u);
+  EXPECT_LT(by_sensors, by_bounds) << "the sensor axis must drop pairs the boxes keep";
+}
+
 // SensorSettings::meeting_pairs with MotionBound::Radius: the candidates hold every pair of the
 // radius bound and every pair that meets within the margins during the step (the 65-time brute
 // force above), and no pair farther now than either reach. The sheet barely moves and the ball
