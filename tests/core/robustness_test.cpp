@@ -738,26 +738,27 @@ TEST(HardConditions, SweptBoundTheSensorsHandOverFewerPairsThanTheBoxesAlone) {
   addAll(sensors, bodies);
   for (Body& b : bodies) ASSERT_EQ(bounds.addBody(descOf(b)), b.id);
   std::size_t met = 0, by_sensors = 0, by_bounds = 0, dropped = 0;
+  const double r = bodies[0].margin + bodies[1].margin;
   for (int step = 1; step <= 6; ++step) {
     fly.moveTo(step, {&sensors, &bounds});
+    std::vector<std::tuple<BodyId, Index, BodyId, Index>> meeting;
+    for (int i = 0; i < 2; ++i) {
+      const Body &a = bodies[i], &b = bodies[1 - i];
+      for (Index v = 0; v < a.mesh.vertices.size(); ++v)
+        for (Index t = 0; t < b.mesh.triangles.size(); ++t)
+          if (meetsDuringStep(a, v, b, b.mesh.triangles[t], r)) meeting.emplace_back(a.id, v, b.id, t);
+    }
+    met += meeting.size();
     for (SensorWorld* w : {&sensors, &bounds}) {
       const StepResult& res = w->step();
       std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
       for (const CandidatePair& c : res.candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
       (w == &sensors ? by_sensors : by_bounds) += res.candidates.size();
       if (w == &sensors) dropped += res.stats.vertices_dropped + res.stats.chunks_dropped;
-      const double r = bodies[0].margin + bodies[1].margin;
-      for (int i = 0; i < 2; ++i) {
-        const Body &a = bodies[i], &b = bodies[1 - i];
-        for (Index v = 0; v < a.mesh.vertices.size(); ++v)
-          for (Index t = 0; t < b.mesh.triangles.size(); ++t) {
-            if (!meetsDuringStep(a, v, b, b.mesh.triangles[t], r)) continue;
-            met += w == &sensors;
-            EXPECT_EQ(cand.count({a.id, v, b.id, t}), 1u) << (w == &sensors ? "sensors" : "bounds") << ", step " << step
-                                                            << ": " << a.name << " vertex " << v << " meets " << b.name
-                                                            << " triangle " << t;
-          }
-      }
+      for (const auto& [vb, v, tb, t] : meeting)
+        EXPECT_EQ(cand.count({vb, v, tb, t}), 1u)
+            << (w == &sensors ? "sensors" : "bounds") << ", step " << step << ": body " << vb << " vertex " << v
+            << " meets body " << tb << " triangle " << t;
     }
   }
   std::cout << "[ swept ] pairs that meet " << met << "; candidates: sensors " << by_sensors << ", bounds " << by_bounds
