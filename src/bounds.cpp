@@ -262,9 +262,9 @@ inline void unpackBoxes(const PackedBox* box, std::size_t chunks, std::vector<Mo
 /// On 8 tori × 50,000 vertices the refit went from 3.42 to 3.16 ms a step with the boxes alone
 /// packed, to about 3.06 ms with the motion too, and to 2.90–2.94 with the motion carried in the
 /// upper box's fourth lane and one prefetch for Bullet's node (m_x and m_q are 16 bytes apart; in
-/// a large node array, which Bullet's allocator starts 32 bytes into a line, they lie in two lines,
-/// and the hardware's prefetchers bring the second: a prefetch of it measured no difference,
-/// docs/DECISIONS.md "Stop 33")
+/// a node array that starts 32 bytes into a line, as Bullet's allocator places one that glibc maps
+/// on its own, they lie in two lines, and the hardware's prefetchers bring the second: a prefetch
+/// of it measured no difference, docs/DECISIONS.md "Stop 33")
 /// (psc_demo --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors
 /// --truth none, refit_ms_mean, two or three alternating runs each).
 /// `Slot`: the type of ChunkLists::foreign's slots (its slotWidth() bytes). Each vertex updates the

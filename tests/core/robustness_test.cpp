@@ -684,6 +684,26 @@ bool meetsDuringStep(const Body& a, Index v, const Body& b, const Triangle& tri,
   return false;
 }
 
+using PairKey = std::tuple<BodyId, Index, BodyId, Index>;
+
+/// Every (vertex, triangle) pair of two bodies, both directions, that meetsDuringStep at radius r.
+std::vector<PairKey> meetingPairs(const std::vector<Body>& bodies, double r) {
+  std::vector<PairKey> out;
+  for (int i = 0; i < 2; ++i) {
+    const Body &a = bodies[i], &b = bodies[1 - i];
+    for (Index v = 0; v < a.mesh.vertices.size(); ++v)
+      for (Index t = 0; t < b.mesh.triangles.size(); ++t)
+        if (meetsDuringStep(a, v, b, b.mesh.triangles[t], r)) out.emplace_back(a.id, v, b.id, t);
+  }
+  return out;
+}
+
+std::set<PairKey> candidateSet(const StepResult& res) {
+  std::set<PairKey> out;
+  for (const CandidatePair& c : res.candidates) out.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+  return out;
+}
+
 // MotionBound::Swept: every (vertex, triangle) pair that comes within the margins at some time of
 // the step (both moving linearly) is a candidate. Reference: the distance at 65 times of the step
 // (a pair found at a sampled time certainly meets the margins), by brute force. Both bodies move,
@@ -700,20 +720,13 @@ TEST(HardConditions, SweptBoundKeepsEveryPairThatMeetsDuringTheStep) {
   for (int step = 1; step <= 6; ++step) {
     fly.moveTo(step, {&swept, &radius});
     const StepResult& res = swept.step();
-    std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
-    for (const CandidatePair& c : res.candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+    const std::set<PairKey> cand = candidateSet(res);
     candidates_swept += res.candidates.size();
     candidates_radius += radius.step().candidates.size();
-    const double r = bodies[0].margin + bodies[1].margin;
-    for (int i = 0; i < 2; ++i) {
-      const Body &a = bodies[i], &b = bodies[1 - i];
-      for (Index v = 0; v < a.mesh.vertices.size(); ++v)
-        for (Index t = 0; t < b.mesh.triangles.size(); ++t) {
-          if (!meetsDuringStep(a, v, b, b.mesh.triangles[t], r)) continue;
-          ++met;
-          EXPECT_EQ(cand.count({a.id, v, b.id, t}), 1u)
-              << "step " << step << ": " << a.name << " vertex " << v << " meets " << b.name << " triangle " << t;
-        }
+    for (const auto& [vb, v, tb, t] : meetingPairs(bodies, bodies[0].margin + bodies[1].margin)) {
+      ++met;
+      EXPECT_EQ(cand.count({vb, v, tb, t}), 1u)
+          << "step " << step << ": body " << vb << " vertex " << v << " meets body " << tb << " triangle " << t;
     }
   }
   EXPECT_GT(met, 50u) << "the ball must cross the sheet";
@@ -738,21 +751,13 @@ TEST(HardConditions, SweptBoundTheSensorsHandOverFewerPairsThanTheBoxesAlone) {
   addAll(sensors, bodies);
   for (Body& b : bodies) ASSERT_EQ(bounds.addBody(descOf(b)), b.id);
   std::size_t met = 0, by_sensors = 0, by_bounds = 0, dropped = 0;
-  const double r = bodies[0].margin + bodies[1].margin;
   for (int step = 1; step <= 6; ++step) {
     fly.moveTo(step, {&sensors, &bounds});
-    std::vector<std::tuple<BodyId, Index, BodyId, Index>> meeting;
-    for (int i = 0; i < 2; ++i) {
-      const Body &a = bodies[i], &b = bodies[1 - i];
-      for (Index v = 0; v < a.mesh.vertices.size(); ++v)
-        for (Index t = 0; t < b.mesh.triangles.size(); ++t)
-          if (meetsDuringStep(a, v, b, b.mesh.triangles[t], r)) meeting.emplace_back(a.id, v, b.id, t);
-    }
+    const std::vector<PairKey> meeting = meetingPairs(bodies, bodies[0].margin + bodies[1].margin);
     met += meeting.size();
     for (SensorWorld* w : {&sensors, &bounds}) {
       const StepResult& res = w->step();
-      std::set<std::tuple<BodyId, Index, BodyId, Index>> cand;
-      for (const CandidatePair& c : res.candidates) cand.insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+      const std::set<PairKey> cand = candidateSet(res);
       (w == &sensors ? by_sensors : by_bounds) += res.candidates.size();
       if (w == &sensors) dropped += res.stats.vertices_dropped + res.stats.chunks_dropped;
       for (const auto& [vb, v, tb, t] : meeting)
