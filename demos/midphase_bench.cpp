@@ -67,13 +67,13 @@ void put(const Recording& r, const Frame& f) {
     }
 }
 
-/// A core world over the recording's Bullet bodies, as the plugin builds it (its default core
-/// settings, the bodies' margins, the positions read in place), with `flagging`.
-psc::SensorWorld coreWorld(const Recording& r, psc::Flagging flagging) {
+/// A core world over Bullet bodies, as the plugin builds it (its default core settings, the
+/// bodies' margins, the positions read in place), with `flagging`.
+psc::SensorWorld coreWorld(const std::vector<btSoftBody*>& bodies, psc::Flagging flagging) {
   psc::SensorSettings settings = psc::bullet::Settings{}.sensors;
   settings.flagging = flagging;
   psc::SensorWorld world(settings);
-  for (btSoftBody* body : r.sim.world->softBodies()) {
+  for (btSoftBody* body : bodies) {
     psc::BodyDesc desc;
     for (int f = 0; f < body->m_faces.size(); ++f) {
       psc::Triangle t;
@@ -90,7 +90,7 @@ psc::SensorWorld coreWorld(const Recording& r, psc::Flagging flagging) {
 }
 
 void run(benchmark::State& state, const Recording& r, psc::Flagging flagging) {
-  psc::SensorWorld world = coreWorld(r, flagging);
+  psc::SensorWorld world = coreWorld(r.sim.world->softBodies(), flagging);
   // Forward, then backward: frame k's positions after frame k+1's are a motion of the same size.
   std::vector<std::size_t> order;
   for (std::size_t k = 0; k < r.frames.size(); ++k) order.push_back(k);
@@ -123,6 +123,54 @@ void run(benchmark::State& state, const Recording& r, psc::Flagging flagging) {
   state.counters["candidates"] = candidates / steps;
   state.counters["probes"] = probes / steps;
   state.counters["separated"] = separated / steps;
+}
+
+/// The refit against the memory it reads, on the speed target's largest pile (8 tori × 50,000
+/// vertices, built once, never stepped by Bullet). Per iteration and body, untimed, each node is
+/// written as predictMotion writes it (m_q = m_x, m_x moved), and then, timed, either the core's
+/// refit of that body (SensorWorld::refitNow, what the plugin's solver calls right there) or a
+/// plain loop that only reads m_x and m_q of every node: the floor of any midphase that looks at
+/// every vertex each step. Counter: ns_per_vertex.
+void refitOrRead(benchmark::State& state, bool refit) {
+  static std::unique_ptr<psc::demo::PluginScene> pile;
+  if (!pile) {
+    psc::demo::SceneParams params;
+    params.resolution = 50000;
+    params.bodies = 8;
+    pile = std::make_unique<psc::demo::PluginScene>(psc::demo::makePluginScene("tori_pile", params));
+  }
+  const std::vector<btSoftBody*>& bodies = pile->world->softBodies();
+  psc::SensorWorld world = coreWorld(bodies, psc::Flagging::SensorsAndBounds);
+  world.step();  // partitions every body
+  const std::vector<psc::BodyId> ids = world.bodyIds();
+  double seconds = 0.0, vertices = 0.0;
+  float sink = 0.0f;
+  btScalar shift = btScalar(1e-4);
+  for (auto _ : state) {
+    shift = -shift;
+    for (std::size_t b = 0; b < bodies.size(); ++b) {
+      btSoftBody::Node* nodes = &bodies[b]->m_nodes[0];
+      const int n = bodies[b]->m_nodes.size();
+      state.PauseTiming();
+      for (int i = 0; i < n; ++i) {
+        nodes[i].m_q = nodes[i].m_x;
+        nodes[i].m_x.setX(nodes[i].m_x.x() + shift);
+      }
+      state.ResumeTiming();
+      const auto t0 = std::chrono::steady_clock::now();
+      if (refit) {
+        if (!world.refitNow(ids[b])) state.SkipWithError("refitNow did not refit");
+      } else {
+        float sum = 0.0f;
+        for (int i = 0; i < n; ++i) sum += nodes[i].m_x.y() + nodes[i].m_q.z();
+        sink += sum;
+      }
+      seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      vertices += double(n);
+    }
+  }
+  benchmark::DoNotOptimize(sink);
+  state.counters["ns_per_vertex"] = 1e9 * seconds / vertices;
 }
 
 struct Case {
@@ -161,6 +209,10 @@ int main(int argc, char** argv) {
                                    [&r, flagging = flagging](benchmark::State& s) { run(s, r, flagging); })
           ->Unit(benchmark::kMillisecond);
   }
+  for (const auto& [refit, name] : {std::pair{true, "refit"}, std::pair{false, "read"}})
+    benchmark::RegisterBenchmark((std::string("tori_pile_8x50000/") + name).c_str(),
+                                 [refit = refit](benchmark::State& s) { refitOrRead(s, refit); })
+        ->Unit(benchmark::kMillisecond);
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
   return 0;
