@@ -268,28 +268,37 @@ inline void unpackBoxes(const PackedBox* box, std::size_t chunks, std::vector<Mo
 /// (psc_demo --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors
 /// --truth none, refit_ms_mean, two or three alternating runs each).
 /// `Slot`: the type of ChunkLists::foreign's slots (its slotWidth() bytes). Each vertex updates the
-/// boxes of its two slots without a branch; an empty slot names the box past the last chunk, which
-/// is thrown away.
-template <typename Slot>
-void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev,
-                      std::size_t prev_stride, std::vector<MotionBox>& boxes, double& sum, float* copy) {
-  const std::size_t n = ch.chunk_of.size(), chunks = ch.count();
-  const std::uint8_t* slots = ch.foreign.slotData();
-  thread_local std::vector<PackedBox> box;
-  box.assign(chunks + 1, emptyPackedBox());
-  const bool prev_apart = prefetchApart(base, stride, prev, prev_stride);
+/// box of its first slot without a branch (half the vertices have one, too irregularly for a
+/// branch); an empty slot names the box past the last chunk, which is thrown away. The second slot
+/// (one vertex in ten: 7.7% on the 50,000-vertex tori) is updated behind a branch, which also ends
+/// the chain of updates through the thrown-away box every vertex without one made.
+/// streamBoxesFloat's loop over the vertices, in a function of its own so that what it touches
+/// lives in registers: its arrays as local pointers, and whether there are previous positions and
+/// a packed copy as compile-time choices. Inlined into refitBounds, the loop kept its pointers,
+/// bounds and strides on the stack and reloaded them, and the thread-local boxes' data pointer,
+/// after each box store (the stores are through a type that may alias anything), with the point
+/// registers spilled around them: on 8 tori × 50,000 vertices (`psc_midphase_bench
+/// --benchmark_filter=8x50000`, three interleaved invocations) the refit went from 10.3–10.8 to
+/// 8.8–9.3 ns per vertex with this and the branch on the second slot, and in the demo (`psc_demo
+/// --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors --truth none
+/// --no-penetration`, two alternating runs) `refit_ms_mean` from 4.10–4.19 to 3.47–3.57 ms.
+template <typename Slot, bool kPrev, bool kCopy>
+[[gnu::noinline]] __m128 streamBoxesFloatLoop(const Index* __restrict chunk_of, const std::uint8_t* __restrict slots,
+                                              std::size_t n, const char* base, std::size_t stride, const char* prev,
+                                              std::size_t prev_stride, bool prev_apart, PackedBox* __restrict box,
+                                              float* __restrict copy, Slot dummy) {
   __m128 nan = _mm_setzero_ps();
   for (std::size_t v = 0; v < n; ++v) {
     __builtin_prefetch(base + (v + 24) * stride);
-    if (prev_apart) __builtin_prefetch(prev + (v + 24) * prev_stride);
-    const Index c = ch.chunk_of[v];
+    if (kPrev && prev_apart) __builtin_prefetch(prev + (v + 24) * prev_stride);
+    const Index c = chunk_of[v];
     if (c == kInvalidIndex) continue;
     const float* p = reinterpret_cast<const float*>(base + v * stride);
-    if (copy != nullptr) std::memcpy(copy + 3 * v, p, 3 * sizeof(float));
+    if (kCopy) std::memcpy(copy + 3 * v, p, 3 * sizeof(float));
     const __m128 xv = loadPoint(p);  // (x, y, z, 0)
     nan = _mm_or_ps(nan, _mm_cmpunord_ps(xv, xv));
     __m128 xm = xv;
-    if (prev != nullptr) {
+    if (kPrev) {
       const __m128 qv = loadPoint(reinterpret_cast<const float*>(prev + v * prev_stride));
       nan = _mm_or_ps(nan, _mm_cmpunord_ps(qv, qv));
       xm = withMotion(xv, qv);  // (x, y, z, m2)
@@ -298,17 +307,44 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
     Slot f[2];
     std::memcpy(f, slots + 2 * sizeof(Slot) * v, sizeof f);
     growPacked(box[f[0]], xv, xv);  // lane 3: 0, the motion stays the own vertices'
-    growPacked(box[f[1]], xv, xv);
+    if (f[1] != dummy) growPacked(box[f[1]], xv, xv);
   }
+  return nan;
+}
+
+template <typename Slot>
+void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev,
+                      std::size_t prev_stride, std::vector<MotionBox>& boxes, double& sum, float* copy) {
+  const std::size_t n = ch.chunk_of.size(), chunks = ch.count();
+  const std::uint8_t* slots = ch.foreign.slotData();
+  thread_local std::vector<PackedBox> box;
+  box.assign(chunks + 1, emptyPackedBox());
+  const bool prev_apart = prefetchApart(base, stride, prev, prev_stride);
+  const Index* chunk_of = ch.chunk_of.data();
+  PackedBox* b = box.data();
+  const auto dummy = static_cast<Slot>(ch.foreign.none());
+  __m128 nan;
+  if (prev != nullptr)
+    nan = copy != nullptr
+              ? streamBoxesFloatLoop<Slot, true, true>(chunk_of, slots, n, base, stride, prev, prev_stride, prev_apart,
+                                                       b, copy, dummy)
+              : streamBoxesFloatLoop<Slot, true, false>(chunk_of, slots, n, base, stride, prev, prev_stride, prev_apart,
+                                                        b, nullptr, dummy);
+  else
+    nan = copy != nullptr
+              ? streamBoxesFloatLoop<Slot, false, true>(chunk_of, slots, n, base, stride, nullptr, 0, false, b, copy,
+                                                        dummy)
+              : streamBoxesFloatLoop<Slot, false, false>(chunk_of, slots, n, base, stride, nullptr, 0, false, b,
+                                                         nullptr, dummy);
   // The rare third and later foreign chunks of a vertex.
   for (const auto& [v, f] : ch.foreign.extra()) {
     const __m128 xv = loadPoint(reinterpret_cast<const float*>(base + std::size_t{v} * stride));
-    growPacked(box[f], xv, xv);
+    growPacked(b[f], xv, xv);
   }
   // A NaN coordinate, or an infinite one (in a box or, through the motion, in the previous
   // positions), makes the sum non-finite: the caller then names it.
   if (_mm_movemask_ps(nan) != 0) sum += std::numeric_limits<double>::quiet_NaN();
-  unpackBoxes(box.data(), chunks, boxes, sum);
+  unpackBoxes(b, chunks, boxes, sum);
 }
 #endif
 
