@@ -503,7 +503,10 @@ struct RestRunAvx2 {
 /// time), with RestFitPass's operations in its order: the same bits
 /// (`ForeignChunks.RestFitPassGivesTheSameBitsWithAndWithoutAvx2`). On 8 tori × 50,000 vertices
 /// with self-collision the refit took 8.8 ms a step through RestFitPass and 5.4 here, against 2.5
-/// without self-collision (docs/DECISIONS.md, "Stop 32").
+/// without self-collision (docs/DECISIONS.md, "Stop 32"). The second foreign slot behind a branch
+/// (as in streamBoxesFloatLoop): 5.97–6.27 → 5.61–5.72 ms (`psc_demo --scene tori_pile --bodies 8
+/// --resolution 50000 --steps 40 --pipeline sensors --truth none --no-penetration
+/// --self-collision`, two alternating runs, docs/DECISIONS.md "Stop 35").
 template <typename Slot>
 [[gnu::target("avx2")]] void streamBoxesFloatRestFit(const ChunkLists& ch, const char* base, std::size_t stride,
                                                      const char* prev, std::size_t prev_stride,
@@ -533,6 +536,7 @@ template <typename Slot>
   const Index* const region_of = ch.region_of.data();
   const Index* const chunk_of = ch.chunk_of.data();
   const Vec3* const rest_at = rest.data();
+  const auto none = static_cast<Slot>(ch.foreign.none());
   RestRunAvx2 run;
   clearRun(run);
   Index run_region = kInvalidIndex;
@@ -551,8 +555,10 @@ template <typename Slot>
     growPacked(bx[c], xv, withMotion(xv, qv));
     Slot fs[2];
     std::memcpy(fs, slots + 2 * sizeof(Slot) * v, sizeof fs);
+    // The second slot behind a branch, as in streamBoxesFloatLoop (one vertex in ten has one).
+    const int foreign = fs[1] != none ? 2 : 1;
     growPacked(bx[fs[0]], xv, xv);
-    growPacked(bx[fs[1]], xv, xv);
+    if (foreign == 2) growPacked(bx[fs[1]], xv, xv);
     // The rest fit in double: x, q and d = x − q exactly (a difference of two floats fits).
     const __m256d x4 = _mm256_cvtps_pd(xv);
     const __m256d d4 = _mm256_sub_pd(x4, _mm256_cvtps_pd(qv));
@@ -574,7 +580,8 @@ template <typename Slot>
     run.xr[0] = _mm256_add_pd(run.xr[0], _mm256_mul_pd(x4, _mm256_broadcast_sd(rp)));
     run.xr[1] = _mm256_add_pd(run.xr[1], _mm256_mul_pd(x4, _mm256_broadcast_sd(rp + 1)));
     run.xr[2] = _mm256_add_pd(run.xr[2], _mm256_mul_pd(x4, _mm256_broadcast_sd(rp + 2)));
-    for (const Slot s : fs) {
+    for (int k = 0; k < foreign; ++k) {
+      const Slot s = fs[k];
       // The thrown-away box past the last chunk takes any rotation: the vertex's own.
       const Index rf = s < chunks ? region_of[s] : r;
       __m256d yf = y4;
