@@ -253,25 +253,6 @@ inline void unpackBoxes(const PackedBox* box, std::size_t chunks, std::vector<Mo
   }
 }
 
-/// streamBoxes for the common step: single-precision positions, the radius bound and no rest fit
-/// (Bullet's nodes); with `copy`, the packed copy of the positions as streamBoxes makes it.
-/// Everything stays in single precision, four lanes (x, y, z, 0): the boxes are the same values as
-/// streamBoxes's (min and max only pick coordinates); the squared motion is rounded in single
-/// precision and raised by 1e-6 relative, so never below the double value; a NaN is caught by an
-/// unordered compare, an infinity by the boxes' or the motion's check.
-/// On 8 tori × 50,000 vertices the refit went from 3.42 to 3.16 ms a step with the boxes alone
-/// packed, to about 3.06 ms with the motion too, and to 2.90–2.94 with the motion carried in the
-/// upper box's fourth lane and one prefetch for Bullet's node (m_x and m_q are 16 bytes apart; in
-/// a node array that starts 32 bytes into a line, as Bullet's allocator places one that glibc maps
-/// on its own, they lie in two lines, and the hardware's prefetchers bring the second: a prefetch
-/// of it measured no difference, docs/DECISIONS.md "Stop 33")
-/// (psc_demo --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors
-/// --truth none, refit_ms_mean, two or three alternating runs each).
-/// `Slot`: the type of ChunkLists::foreign's slots (its slotWidth() bytes). Each vertex updates the
-/// box of its first slot without a branch (half the vertices have one, too irregularly for a
-/// branch); an empty slot names the box past the last chunk, which is thrown away. The second slot
-/// (one vertex in ten: 7.7% on the 50,000-vertex tori) is updated behind a branch, which also ends
-/// the chain of updates through the thrown-away box every vertex without one made.
 /// streamBoxesFloat's loop over the vertices, in a function of its own so that what it touches
 /// lives in registers: its arrays as local pointers, and whether there are previous positions and
 /// a packed copy as compile-time choices. Inlined into refitBounds, the loop kept its pointers,
@@ -282,6 +263,12 @@ inline void unpackBoxes(const PackedBox* box, std::size_t chunks, std::vector<Mo
 /// 8.8–9.3 ns per vertex with this and the branch on the second slot, and in the demo (`psc_demo
 /// --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors --truth none
 /// --no-penetration`, two alternating runs) `refit_ms_mean` from 4.10–4.19 to 3.47–3.57 ms.
+///
+/// `Slot`: the type of ChunkLists::foreign's slots (its slotWidth() bytes). Each vertex updates the
+/// box of its first slot without a branch (half the vertices have one, too irregularly for a
+/// branch); an empty slot names the box past the last chunk, which is thrown away. The second slot
+/// (one vertex in ten: 7.7% on the 50,000-vertex tori) is updated behind a branch, which also ends
+/// the chain of updates through the thrown-away box every vertex without one made.
 template <typename Slot, bool kPrev, bool kCopy>
 [[gnu::noinline]] __m128 streamBoxesFloatLoop(const Index* __restrict chunk_of, const std::uint8_t* __restrict slots,
                                               std::size_t n, const char* base, std::size_t stride, const char* prev,
@@ -312,6 +299,20 @@ template <typename Slot, bool kPrev, bool kCopy>
   return nan;
 }
 
+/// streamBoxes for the common step: single-precision positions, the radius bound and no rest fit
+/// (Bullet's nodes); with `copy`, the packed copy of the positions as streamBoxes makes it.
+/// Everything stays in single precision, four lanes (x, y, z, 0): the boxes are the same values as
+/// streamBoxes's (min and max only pick coordinates); the squared motion is rounded in single
+/// precision and raised by 1e-6 relative, so never below the double value; a NaN is caught by an
+/// unordered compare, an infinity by the boxes' or the motion's check.
+/// On 8 tori × 50,000 vertices the refit went from 3.42 to 3.16 ms a step with the boxes alone
+/// packed, to about 3.06 ms with the motion too, and to 2.90–2.94 with the motion carried in the
+/// upper box's fourth lane and one prefetch for Bullet's node (m_x and m_q are 16 bytes apart; in
+/// a node array that starts 32 bytes into a line, as Bullet's allocator places one that glibc maps
+/// on its own, they lie in two lines, and the hardware's prefetchers bring the second: a prefetch
+/// of it measured no difference, docs/DECISIONS.md "Stop 33")
+/// (psc_demo --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors
+/// --truth none, refit_ms_mean, two or three alternating runs each).
 template <typename Slot>
 void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev,
                       std::size_t prev_stride, std::vector<MotionBox>& boxes, double& sum, float* copy) {
