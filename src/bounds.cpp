@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 #include <unordered_map>
 
 #if defined(__SSE2__)
@@ -273,7 +274,7 @@ template <typename Slot, bool kPrev, bool kCopy>
 [[gnu::noinline]] __m128 streamBoxesFloatLoop(const Index* __restrict chunk_of, const std::uint8_t* __restrict slots,
                                               std::size_t n, const char* base, std::size_t stride, const char* prev,
                                               std::size_t prev_stride, bool prev_apart, PackedBox* __restrict box,
-                                              float* __restrict copy, Slot dummy) {
+                                              float* __restrict copy, Slot none) {
   __m128 nan = _mm_setzero_ps();
   for (std::size_t v = 0; v < n; ++v) {
     __builtin_prefetch(base + (v + 24) * stride);
@@ -294,7 +295,7 @@ template <typename Slot, bool kPrev, bool kCopy>
     Slot f[2];
     std::memcpy(f, slots + 2 * sizeof(Slot) * v, sizeof f);
     growPacked(box[f[0]], xv, xv);  // lane 3: 0, the motion stays the own vertices'
-    if (f[1] != dummy) growPacked(box[f[1]], xv, xv);
+    if (f[1] != none) growPacked(box[f[1]], xv, xv);
   }
   return nan;
 }
@@ -323,20 +324,17 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
   const bool prev_apart = prefetchApart(base, stride, prev, prev_stride);
   const Index* chunk_of = ch.chunk_of.data();
   PackedBox* b = box.data();
-  const auto dummy = static_cast<Slot>(ch.foreign.none());
-  __m128 nan;
-  if (prev != nullptr)
-    nan = copy != nullptr
-              ? streamBoxesFloatLoop<Slot, true, true>(chunk_of, slots, n, base, stride, prev, prev_stride, prev_apart,
-                                                       b, copy, dummy)
-              : streamBoxesFloatLoop<Slot, true, false>(chunk_of, slots, n, base, stride, prev, prev_stride, prev_apart,
-                                                        b, nullptr, dummy);
-  else
-    nan = copy != nullptr
-              ? streamBoxesFloatLoop<Slot, false, true>(chunk_of, slots, n, base, stride, nullptr, 0, false, b, copy,
-                                                        dummy)
-              : streamBoxesFloatLoop<Slot, false, false>(chunk_of, slots, n, base, stride, nullptr, 0, false, b,
-                                                         nullptr, dummy);
+  const auto none = static_cast<Slot>(ch.foreign.none());
+  // The loop for this call's two compile-time choices (without previous positions prev is null and
+  // prev_apart false; without a copy, copy is null).
+  const auto loop = [&](auto with_prev, auto with_copy) {
+    return streamBoxesFloatLoop<Slot, decltype(with_prev)::value, decltype(with_copy)::value>(
+        chunk_of, slots, n, base, stride, prev, prev_stride, prev_apart, b, copy, none);
+  };
+  using Yes = std::true_type;
+  using No = std::false_type;
+  const __m128 nan = prev != nullptr ? (copy != nullptr ? loop(Yes{}, Yes{}) : loop(Yes{}, No{}))
+                                     : (copy != nullptr ? loop(No{}, Yes{}) : loop(No{}, No{}));
   // The rare third and later foreign chunks of a vertex.
   for (const auto& [v, f] : ch.foreign.extra()) {
     const __m128 xv = loadPoint(reinterpret_cast<const float*>(base + std::size_t{v} * stride));
