@@ -140,44 +140,6 @@ class RestFitPass {
   Index region_ = kInvalidIndex;
 };
 
-/// Asks for vertex v + kAhead's position records ahead of the pass that reads them, the previous
-/// position's too where it may lie in another cache line (`prev_apart`), into the cache level
-/// `kLocality` names (__builtin_prefetch's: 3 is prefetcht0, the first level; 2 is prefetcht1, the
-/// second). Positions usually live inside larger records: Bullet's nodes are 256 bytes, m_x and
-/// m_q 16 bytes apart, and in a node array that starts 32 bytes into a cache line (as Bullet's
-/// 16-byte aligned allocator places one that glibc maps on its own) the two lie in two lines.
-///
-/// Which distance and level suit a pass depends on how long it spends per vertex. Measured on
-/// 8 tori × 50,000 vertices (`psc_demo --scene tori_pile --bodies 8 --resolution 50000 --steps
-/// 60..100 --pipeline sensors --truth none --no-penetration`, with and without `--self-collision`),
-/// with a temporary build in which successive refit calls took the variants in turn, so that each
-/// ran on every body and in every phase of the run, and timed the pass alone (docs/DECISIONS.md,
-/// "Stop 36"): the packed pass (streamBoxesFloatLoop, about 6–8 ns a vertex) read 6.9 and 7.6 ns
-/// per vertex with both lines into the second level 64 vertices ahead against 7.5 and 8.5 with one
-/// prefetcht0 of m_x's line 24 ahead (what every pass did before), 5.8–6.7 against 7.7 in a third
-/// run, and distances 40 to 128 the same; the rest fit's AVX2 pass (about 14–16 ns a vertex) was
-/// 12–13% slower that way, and with both lines into the first level 24 ahead as fast as before
-/// (14.2 and 13.6 against 14.6 and 14.4 ns). At 2,000 and 600 vertices, where the nodes stay in the
-/// caches, every variant read the same.
-template <std::size_t kAhead, int kLocality>
-[[gnu::always_inline]] inline void fetchAhead(const char* base, std::size_t stride, const char* prev,
-                                              std::size_t prev_stride, bool prev_apart, std::size_t v) {
-  __builtin_prefetch(base + (v + kAhead) * stride, 0, kLocality);
-  if (prev_apart) __builtin_prefetch(prev + (v + kAhead) * prev_stride, 0, kLocality);
-}
-
-/// Whether the previous positions need fetches of their own: there are some, and the record of a
-/// vertex's previous position is not in the cache line of its current one for every vertex (it is
-/// when both have one stride, a multiple of the line, and share the first vertex's line).
-inline bool prefetchApart(const char* base, std::size_t stride, const char* prev, std::size_t prev_stride,
-                          std::size_t record_bytes) {
-  if (prev == nullptr) return false;
-  const auto line = [](const char* at) { return reinterpret_cast<std::uintptr_t>(at) / 64; };
-  const bool one_line = stride == prev_stride && stride % 64 == 0 && line(base) == line(base + record_bytes - 1) &&
-                        line(prev) == line(base) && line(prev + record_bytes - 1) == line(base);
-  return !one_line;
-}
-
 /// The refit's one pass over the vertices in memory order. With `copy`, each vertex's three
 /// coordinates are also written there, packed (3 T per vertex), for the repartition check's
 /// measures.
@@ -185,9 +147,10 @@ template <typename T, typename Hook>
 void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev, std::size_t prev_stride,
                  bool swept, bool paths, std::vector<MotionBox>& boxes, double& sum, Hook& hook, T* copy) {
   const std::size_t n = ch.chunk_of.size();
-  const bool prev_apart = prefetchApart(base, stride, prev, prev_stride, 3 * sizeof(T));
   for (std::size_t v = 0; v < n; ++v) {
-    fetchAhead<24, 3>(base, stride, prev, prev_stride, prev_apart, v);
+    // Positions usually live inside larger records (Bullet's nodes are 256 bytes): fetch ahead.
+    __builtin_prefetch(base + (v + 24) * stride);
+    if (prev != nullptr) __builtin_prefetch(prev + (v + 24) * prev_stride);
     const Index c = ch.chunk_of[v];
     if (c == kInvalidIndex) continue;
     const T* p = reinterpret_cast<const T*>(base + v * stride);
@@ -267,6 +230,15 @@ inline PackedBox emptyPackedBox() {
   return _mm_movelh_ps(xv, _mm_unpacklo_ps(_mm_movehl_ps(xv, xv), m2));
 }
 
+/// Whether the previous positions need prefetches of their own: another stride, or records a cache
+/// line or more away from the current ones (otherwise one prefetch brings both, or the line after
+/// it, which the hardware fetches with it: see streamBoxesFloat).
+inline bool prefetchApart(const char* base, std::size_t stride, const char* prev, std::size_t prev_stride) {
+  if (prev == nullptr) return false;
+  const auto at = reinterpret_cast<std::uintptr_t>(base), before = reinterpret_cast<std::uintptr_t>(prev);
+  return prev_stride != stride || (before > at ? before - at : at - before) >= 64;
+}
+
 /// The packed boxes into `boxes`; each squared motion, rounded in single precision (a few ulps,
 /// < 1e-6 relative), is raised by 1e-6 so that it never falls below the double value, and added to
 /// `sum` (squared until the end of the pass).
@@ -305,7 +277,8 @@ template <typename Slot, bool kPrev, bool kCopy>
                                               float* __restrict copy, Slot none) {
   __m128 nan = _mm_setzero_ps();
   for (std::size_t v = 0; v < n; ++v) {
-    fetchAhead<64, 2>(base, stride, prev, prev_stride, kPrev && prev_apart, v);
+    __builtin_prefetch(base + (v + 24) * stride);
+    if (kPrev && prev_apart) __builtin_prefetch(prev + (v + 24) * prev_stride);
     const Index c = chunk_of[v];
     if (c == kInvalidIndex) continue;
     const float* p = reinterpret_cast<const float*>(base + v * stride);
@@ -335,10 +308,12 @@ template <typename Slot, bool kPrev, bool kCopy>
 /// unordered compare, an infinity by the boxes' or the motion's check.
 /// On 8 tori × 50,000 vertices the refit went from 3.42 to 3.16 ms a step with the boxes alone
 /// packed, to about 3.06 ms with the motion too, and to 2.90–2.94 with the motion carried in the
-/// upper box's fourth lane and one prefetch for Bullet's node (psc_demo --scene tori_pile --bodies 8
-/// --resolution 50000 --steps 40 --pipeline sensors --truth none, refit_ms_mean, two or three
-/// alternating runs each). Since stop 36 both of a node's lines are fetched, into the second-level
-/// cache and further ahead (fetchAhead).
+/// upper box's fourth lane and one prefetch for Bullet's node (m_x and m_q are 16 bytes apart; in
+/// a node array that starts 32 bytes into a line, as Bullet's allocator places one that glibc maps
+/// on its own, they lie in two lines, and the hardware's prefetchers bring the second: a prefetch
+/// of it measured no difference, docs/DECISIONS.md "Stop 33")
+/// (psc_demo --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors
+/// --truth none, refit_ms_mean, two or three alternating runs each).
 template <typename Slot>
 void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev,
                       std::size_t prev_stride, std::vector<MotionBox>& boxes, double& sum, float* copy) {
@@ -346,7 +321,7 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
   const std::uint8_t* slots = ch.foreign.slotData();
   thread_local std::vector<PackedBox> box;
   box.assign(chunks + 1, emptyPackedBox());
-  const bool prev_apart = prefetchApart(base, stride, prev, prev_stride, 3 * sizeof(float));
+  const bool prev_apart = prefetchApart(base, stride, prev, prev_stride);
   const Index* chunk_of = ch.chunk_of.data();
   PackedBox* b = box.data();
   const auto none = static_cast<Slot>(ch.foreign.none());
@@ -551,7 +526,7 @@ template <typename Slot>
   cols.resize(regions);
   for (std::size_t r = 0; r < regions; ++r)
     for (int j = 0; j < 3; ++j) cols[r].v[j] = _mm256_setr_pd(f.rot[r](0, j), f.rot[r](1, j), f.rot[r](2, j), 0.0);
-  const bool prev_apart = prefetchApart(base, stride, prev, prev_stride, 3 * sizeof(float));
+  const bool prev_apart = prefetchApart(base, stride, prev, prev_stride);
   // Raw pointers: the intrinsics' vector types may alias anything, so the vectors' own data
   // pointers would otherwise be read again after every store.
   PackedBox* const bx = box.data();
@@ -566,7 +541,8 @@ template <typename Slot>
   Index run_region = kInvalidIndex;
   __m128 nan = _mm_setzero_ps();
   for (std::size_t v = 0; v < n; ++v) {
-    fetchAhead<24, 3>(base, stride, prev, prev_stride, prev_apart, v);
+    __builtin_prefetch(base + (v + 24) * stride);
+    if (prev_apart) __builtin_prefetch(prev + (v + 24) * prev_stride);
     const Index c = chunk_of[v];
     if (c == kInvalidIndex) continue;
     const float* p = reinterpret_cast<const float*>(base + v * stride);
