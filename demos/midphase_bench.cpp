@@ -12,7 +12,9 @@
 // Counters: ms_per_step (the mean wall time of step() over the frames), candidates and probes per
 // step, and the region pairs the sensors proved apart. The frames are replayed forward, then
 // backward, so the particles track a motion that does not jump; the timing pauses only while a
-// frame is written into the nodes.
+// frame is written into the nodes. The `sensors_self` rows switch every body's self-collision on
+// (rest shape: the first recorded frame) and count its candidates too (self_candidates): beside
+// `sensors`, what self-collision costs where the bodies do not fold.
 #include "plugin_scene.h"
 #include "psc/world.h"
 
@@ -68,8 +70,9 @@ void put(const Recording& r, const Frame& f) {
 }
 
 /// A core world over Bullet bodies, as the plugin builds it (its default core settings, the
-/// bodies' margins, the positions read in place), with `flagging`.
-psc::SensorWorld coreWorld(const std::vector<btSoftBody*>& bodies, psc::Flagging flagging) {
+/// bodies' margins, the positions read in place), with `flagging`, and with every body's
+/// self-collision on when `self` (its rest shape: the positions of the first recorded frame).
+psc::SensorWorld coreWorld(const std::vector<btSoftBody*>& bodies, psc::Flagging flagging, bool self = false) {
   psc::SensorSettings settings = psc::bullet::Settings{}.sensors;
   settings.flagging = flagging;
   psc::SensorWorld world(settings);
@@ -84,13 +87,15 @@ psc::SensorWorld coreWorld(const std::vector<btSoftBody*>& bodies, psc::Flagging
     desc.positions = psc::PositionView(body->m_nodes[0].m_x.m_floats, n, stride);
     desc.previous = psc::PositionView(body->m_nodes[0].m_q.m_floats, n, stride);
     desc.margin = body->getCollisionShape()->getMargin();
+    desc.self_collision = self;
     world.addBody(desc);
   }
   return world;
 }
 
-void run(benchmark::State& state, const Recording& r, psc::Flagging flagging) {
-  psc::SensorWorld world = coreWorld(r.sim.world->softBodies(), flagging);
+void run(benchmark::State& state, const Recording& r, psc::Flagging flagging, bool self) {
+  if (self) put(r, r.frames.front());  // the rest shape
+  psc::SensorWorld world = coreWorld(r.sim.world->softBodies(), flagging, self);
   // Forward, then backward: frame k's positions after frame k+1's are a motion of the same size.
   std::vector<std::size_t> order;
   for (std::size_t k = 0; k < r.frames.size(); ++k) order.push_back(k);
@@ -100,7 +105,7 @@ void run(benchmark::State& state, const Recording& r, psc::Flagging flagging) {
     put(r, r.frames[k]);
     world.step();
   }
-  double seconds = 0.0, candidates = 0.0, probes = 0.0, separated = 0.0, steps = 0.0;
+  double seconds = 0.0, candidates = 0.0, probes = 0.0, separated = 0.0, self_candidates = 0.0, steps = 0.0;
   bool same = true;
   for (auto _ : state) {
     for (std::size_t k : order) {
@@ -113,9 +118,11 @@ void run(benchmark::State& state, const Recording& r, psc::Flagging flagging) {
       candidates += double(s.candidates.size());
       probes += double(s.stats.candidate_probes);
       separated += double(s.stats.region_pairs_separated);
+      self_candidates += double(s.stats.self_candidate_pairs);
       steps += 1.0;
-      // The candidates do not depend on the flagging, nor on where the particles are.
-      same = same && s.candidates.size() == r.candidates[k];
+      // The candidates between bodies do not depend on the flagging, nor on where the particles
+      // are, nor on self-collision.
+      same = same && s.candidates.size() - s.stats.self_candidate_pairs == r.candidates[k];
     }
   }
   if (!same) state.SkipWithError("the candidates differ from the plugin's at the same step");
@@ -123,6 +130,7 @@ void run(benchmark::State& state, const Recording& r, psc::Flagging flagging) {
   state.counters["candidates"] = candidates / steps;
   state.counters["probes"] = probes / steps;
   state.counters["separated"] = separated / steps;
+  if (self) state.counters["self_candidates"] = self_candidates / steps;
 }
 
 /// The refit against the memory it reads, on the speed target's largest pile (8 tori × 50,000
@@ -185,7 +193,11 @@ int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   // The suite's heaviest scenes at the ablation's resolution, and the 8-tori pile of the speed target.
-  const Case cases[] = {{"mixed_pile_600", "mixed_pile", 600, 0, 100, 40},
+  // head_on: its steps 10–89 (in contact until about step 45, then apart) and the contact alone,
+  // where self-collision's cost lies (sensors_self).
+  const Case cases[] = {{"head_on_600", "head_on", 600, 0, 10, 80},
+                        {"head_on_contact", "head_on", 600, 0, 10, 36},
+                        {"mixed_pile_600", "mixed_pile", 600, 0, 100, 40},
                         {"mesh_600", "mesh", 600, 0, 100, 40},
                         {"tori_pile_600", "tori_pile", 600, 0, 100, 40},
                         {"tori_pile_8x2000", "tori_pile", 2000, 8, 60, 40}};
@@ -203,10 +215,18 @@ int main(int argc, char** argv) {
     const Recording& r = *recordings.back();
     std::fprintf(stderr, "psc_midphase_bench: %s: steps %zu to %zu recorded\n", k.label, r.first_step,
                  r.first_step + r.frames.size() - 1);
-    for (const auto& [flagging, name] : {std::pair{psc::Flagging::SensorsAndBounds, "sensors"},
-                                         std::pair{psc::Flagging::Bounds, "bounds"}})
-      benchmark::RegisterBenchmark((std::string(k.label) + "/" + name).c_str(),
-                                   [&r, flagging = flagging](benchmark::State& s) { run(s, r, flagging); })
+    // sensors_self: every body's self-collision on, for its overhead where (in these recordings,
+    // simulated without it) the bodies barely touch themselves.
+    struct Variant {
+      psc::Flagging flagging;
+      bool self;
+      const char* name;
+    };
+    for (const Variant& v : {Variant{psc::Flagging::SensorsAndBounds, false, "sensors"},
+                             Variant{psc::Flagging::Bounds, false, "bounds"},
+                             Variant{psc::Flagging::SensorsAndBounds, true, "sensors_self"}})
+      benchmark::RegisterBenchmark((std::string(k.label) + "/" + v.name).c_str(),
+                                   [&r, v](benchmark::State& s) { run(s, r, v.flagging, v.self); })
           ->Unit(benchmark::kMillisecond);
   }
   for (const auto& [refit, name] : {std::pair{true, "refit"}, std::pair{false, "read"}})

@@ -1757,13 +1757,22 @@ std::size_t dropUnbentPicks(const PairContext& ctx, Index ct, const VertexRec* r
   const Vec3& lo = f.chunk_lo[ct];
   const Vec3& hi = f.chunk_hi[ct];
   const double exclusion = std::sqrt(ctx.self_exclude2);
+  // Every vertex's deviation is at least the box's half diagonal (its farthest corner from the
+  // centre): when that alone leaves no room within the smallest reach, no pick can leave.
+  const double half2 = 0.25 * (hi - lo).squaredNorm();
+  double least_reach2 = std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k < n_picked; ++k) least_reach2 = std::min(least_reach2, recs[picked[k]].reach2);
+  const double most_room = exclusion - std::sqrt(least_reach2) * (1.0 + 1e-9);
+  if (!(most_room >= 0.0 && half2 <= most_room * most_room)) return n_picked;
   std::size_t n = 0;
   for (std::size_t k = 0; k < n_picked; ++k) {
     const VertexRec& vr = recs[picked[k]];
     const Vec3 y = vr.x - rot * ctx.tb.rest[vr.v];
-    const double deviation = (lo - y).cwiseAbs().cwiseMax((hi - y).cwiseAbs()).norm();
+    // restClears(exclusion, deviation, reach) on the squares: no square root of the deviation.
+    const double room = exclusion - std::sqrt(vr.reach2) * (1.0 + 1e-9);
+    const double deviation2 = (lo - y).cwiseAbs().cwiseMax((hi - y).cwiseAbs()).squaredNorm();
     picked[n] = picked[k];
-    n += static_cast<std::size_t>(!restClears(exclusion, deviation, std::sqrt(vr.reach2)));
+    n += static_cast<std::size_t>(!(room >= 0.0 && deviation2 <= room * room));
   }
   ctx.counters.self_vertices_unbent += n_picked - n;
   return n;
@@ -1933,6 +1942,9 @@ bool restClears(double exclusion, double deviation, double reach) {
 /// to each box's farthest corner. k is tried at the two centres and halfway between them.
 bool restApartChunks(const Body& X, Index a, Index b, double exclusion, double reach) {
   const RestFit& f = *X.rest_fit;
+  // No translation does better than the two half diagonals (each box's farthest corner is nearest
+  // from its centre): most pairs of a body bent as a whole end here.
+  if (!restClears(exclusion, f.chunk_half[a] + f.chunk_half[b], reach)) return false;
   const std::vector<Index>& region_of = X.chunks.region_of;
   double deviation = restDeviation(f, region_of[a], f.chunk_center[a], f.chunk_half[a], region_of[b],
                                    f.chunk_center[b], f.chunk_half[b], f.chunk_rest_center[b], f.chunk_rest_radius[b]);
@@ -1949,6 +1961,7 @@ bool restApartChunks(const Body& X, Index a, Index b, double exclusion, double r
 /// No pair between regions i and j of X (both directions) can be a candidate.
 bool restApartRegions(const Body& X, Index i, Index j, double exclusion, double reach) {
   const RestFit& f = *X.rest_fit;
+  if (!restClears(exclusion, f.region_half[i] + f.region_half[j], reach)) return false;  // as restApartChunks
   return restClears(exclusion,
                     restDeviation(f, i, f.region_center[i], f.region_half[i], j, f.region_center[j], f.region_half[j],
                                   f.region_rest_center[j], f.region_rest_radius[j]),
@@ -2143,7 +2156,7 @@ class Collector {
         itemsOf(s_.near_b, s_.items_b);
         sweepBetween(s_.items_a, s_.items_b, keep);
       }
-      std::sort(chunk_pairs_.begin(), chunk_pairs_.end());
+      // No sort: the body's keys are sorted below, and what they are does not depend on the order.
       counters_.chunk_pairs += chunk_pairs_.size();
       s_.clearRecords();
       for (const auto& [ka, kb] : chunk_pairs_) {
