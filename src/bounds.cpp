@@ -1739,6 +1739,7 @@ void narrowToPicks(const VertexLanes& lanes, std::size_t at, const Index* picked
 }
 
 bool restClears(double exclusion, double deviation, double reach);
+bool restClearsSquared(double exclusion, double deviation2, double reach);
 
 /// [beyond] The rest-shape bound for each picked vertex of a self pair, against the triangle chunk
 /// ct of its own body. With R the rotation of ct's region and y = x − R·rest, every corner c of
@@ -1759,20 +1760,16 @@ std::size_t dropUnbentPicks(const PairContext& ctx, Index ct, const VertexRec* r
   const double exclusion = std::sqrt(ctx.self_exclude2);
   // Every vertex's deviation is at least the box's half diagonal (its farthest corner from the
   // centre): when that alone leaves no room within the smallest reach, no pick can leave.
-  const double half2 = 0.25 * (hi - lo).squaredNorm();
   double least_reach2 = std::numeric_limits<double>::infinity();
   for (std::size_t k = 0; k < n_picked; ++k) least_reach2 = std::min(least_reach2, recs[picked[k]].reach2);
-  const double most_room = exclusion - std::sqrt(least_reach2) * (1.0 + 1e-9);
-  if (!(most_room >= 0.0 && half2 <= most_room * most_room)) return n_picked;
+  if (!restClearsSquared(exclusion, 0.25 * (hi - lo).squaredNorm(), std::sqrt(least_reach2))) return n_picked;
   std::size_t n = 0;
   for (std::size_t k = 0; k < n_picked; ++k) {
     const VertexRec& vr = recs[picked[k]];
     const Vec3 y = vr.x - rot * ctx.tb.rest[vr.v];
-    // restClears(exclusion, deviation, reach) on the squares: no square root of the deviation.
-    const double room = exclusion - std::sqrt(vr.reach2) * (1.0 + 1e-9);
     const double deviation2 = (lo - y).cwiseAbs().cwiseMax((hi - y).cwiseAbs()).squaredNorm();
     picked[n] = picked[k];
-    n += static_cast<std::size_t>(!(room >= 0.0 && deviation2 <= room * room));
+    n += static_cast<std::size_t>(!restClearsSquared(exclusion, deviation2, std::sqrt(vr.reach2)));
   }
   ctx.counters.self_vertices_unbent += n_picked - n;
   return n;
@@ -1937,6 +1934,12 @@ bool restClears(double exclusion, double deviation, double reach) {
   return exclusion - deviation >= reach * (1.0 + 1e-9);
 }
 
+/// restClears of a squared deviation, without its square root.
+bool restClearsSquared(double exclusion, double deviation2, double reach) {
+  const double room = exclusion - reach * (1.0 + 1e-9);
+  return room >= 0.0 && deviation2 <= room * room;
+}
+
 /// No (vertex of chunk a, triangle of chunk b) pair of X can be a candidate. Chunks of one region
 /// share its rotation, and their y-boxes give the deviations exactly for any k: the distance from k
 /// to each box's farthest corner. k is tried at the two centres and halfway between them.
@@ -1961,7 +1964,6 @@ bool restApartChunks(const Body& X, Index a, Index b, double exclusion, double r
 /// No pair between regions i and j of X (both directions) can be a candidate.
 bool restApartRegions(const Body& X, Index i, Index j, double exclusion, double reach) {
   const RestFit& f = *X.rest_fit;
-  if (!restClears(exclusion, f.region_half[i] + f.region_half[j], reach)) return false;  // as restApartChunks
   return restClears(exclusion,
                     restDeviation(f, i, f.region_center[i], f.region_half[i], j, f.region_center[j], f.region_half[j],
                                   f.region_rest_center[j], f.region_rest_radius[j]),
