@@ -79,6 +79,14 @@ void collectFound(SceneWorld& sw, std::vector<ContactKey>& out, std::vector<Cont
   out.clear();
   self.clear();
   const auto& soft = sw.softBodies();
+  // Sized before filling: grown by doubling, these held up to twice the contacts' keys on a pile
+  // whose contacts grow from step to step, and the measurement's memory is in peak_rss_mb.
+  std::size_t total = 0;
+  for (const btSoftBody* psb : soft) total += static_cast<std::size_t>(psb->m_scontacts.size());
+  if (total > out.capacity()) {
+    out = std::vector<ContactKey>();
+    out.reserve(total + total / 8);
+  }
   for (std::size_t i = 0; i < soft.size(); ++i) {
     const btSoftBody* psb = soft[i];
     for (int c = 0; c < psb->m_scontacts.size(); ++c) {

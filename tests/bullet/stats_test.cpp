@@ -6,10 +6,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <optional>
 #include <set>
 #include <tuple>
+#include <vector>
 
 namespace {
 
@@ -116,6 +118,36 @@ TEST(Stats, ASecondDispatchInTheSameStepAddsNoContacts) {
   EXPECT_GT(first, 0);
   EXPECT_EQ(second, first);
   EXPECT_EQ(plugin.stats().sensor_steps, 11u);
+}
+
+// Each body's contact array gets room for all its candidates before the exact stage makes a
+// contact (so it never grows while it fills), and holds about the most a step has needed, not
+// Bullet's doubling: at most an eighth more than the largest count of candidates it has had.
+TEST(Stats, ContactArraysHoldRoomForTheirCandidatesAndLittleMore) {
+  psc_test::SoftWorld w(0);
+  psc_test::buildScene(Scene::ThreeInARow, w);
+  auto plugin = psc::bullet::install(w.world);
+  const auto& bodies = w.world.getSoftBodyArray();
+  std::vector<std::size_t> most(static_cast<std::size_t>(bodies.size()), 0);
+  std::size_t steps_with_contacts = 0;
+  for (int step = 0; step < 60; ++step) {
+    w.run(1, [&] {
+      const auto& candidates = plugin.sensorWorld().lastResult().candidates;
+      for (int b = 0; b < bodies.size(); ++b) {
+        const std::optional<psc::BodyId> id = plugin.bodyId(bodies[b]);
+        ASSERT_TRUE(id.has_value());
+        std::size_t need = 0;
+        for (const psc::CandidatePair& c : candidates) need += c.vertex_body == *id;
+        std::size_t& m = most[static_cast<std::size_t>(b)];
+        m = std::max(m, need);
+        const auto& list = bodies[b]->m_scontacts;
+        EXPECT_GE(static_cast<std::size_t>(list.capacity()), need) << "body " << b << ", step " << step;
+        EXPECT_LE(static_cast<std::size_t>(list.capacity()), m + m / 8) << "body " << b << ", step " << step;
+        steps_with_contacts += list.size() > 0;
+      }
+    });
+  }
+  EXPECT_GT(steps_with_contacts, 20u) << "the scene must make contacts for the test to mean anything";
 }
 
 TEST(Stats, SensorsStepEvenWhenNoSoftPairIsDispatched) {
