@@ -82,7 +82,6 @@ psc::SensorSettings coreSettings(const Settings& settings) {
   return core;
 }
 
-
 /// Room in each body's m_scontacts, before the exact stage makes its first contact, for every
 /// contact its candidates can make this step (one at most per candidate; `candidates` sorted by
 /// vertex body). Left to itself Bullet's array doubles as it fills, copying into a new block while
@@ -108,6 +107,7 @@ void reserveContacts(const std::vector<psc::CandidatePair>& candidates, const de
     list.reserve(static_cast<int>(want));
   }
 }
+
 }  // namespace
 
 double runawayContacts(const btSoftBody& a, const btSoftBody& b) {
