@@ -350,9 +350,12 @@ void Installation::setSelfCollision(const btSoftBody* body, bool on) {
   self_overrides_[body] = on;
 }
 
-void Installation::countFallback() noexcept {
+void Installation::collideFallback(btCollisionAlgorithm& fallback, const btCollisionObjectWrapper* body0,
+                                   const btCollisionObjectWrapper* body1, const btDispatcherInfo& info,
+                                   btManifoldResult* result) {
   std::lock_guard<std::mutex> lock(mutex_);
   ++stats_.fallback_pairs;
+  fallback.processCollision(body0, body1, info, result);
 }
 
 bool Installation::sensedThisStep() const { return world_.getDispatchInfo().m_stepCount == kSensed; }

@@ -50,7 +50,12 @@ class Installation {
   /// Collides the pair from the sensors' candidates; false when the pair is not the sensors'
   /// (then the caller hands it to the previous algorithm). Never throws.
   bool collide(btSoftBody& a, btSoftBody& b) noexcept;
-  void countFallback() noexcept;
+  /// Runs Bullet's previous algorithm on a soft-soft pair that is not the sensors', under the
+  /// plugin's lock: Bullet's own test pushes into both bodies' m_scontacts, which the plugin's
+  /// pairs (and the room it reserves in them each step) write too, so under a dispatcher that
+  /// collides pairs on several threads the two must not overlap.
+  void collideFallback(btCollisionAlgorithm& fallback, const btCollisionObjectWrapper* body0,
+                       const btCollisionObjectWrapper* body1, const btDispatcherInfo& info, btManifoldResult* result);
   btCollisionAlgorithmCreateFunc* previousCreateFunc() const { return previous_; }
   void algorithmCreated() { ++live_algorithms_; }
   void algorithmDestroyed() { --live_algorithms_; }

@@ -37,8 +37,7 @@ void SoftSoftAlgorithm::processCollision(const btCollisionObjectWrapper* body0, 
     fallback_ = create->CreateCollisionAlgorithm(fallback_info, body0, body1);
     if (fallback_ == nullptr) return;
   }
-  owner_.countFallback();
-  fallback_->processCollision(body0, body1, info, result);
+  owner_.collideFallback(*fallback_, body0, body1, info, result);
 }
 
 btScalar SoftSoftAlgorithm::calculateTimeOfImpact(btCollisionObject* body0, btCollisionObject* body1,

@@ -131,6 +131,7 @@ TEST(Stats, ContactArraysHoldRoomForTheirCandidatesAndLittleMore) {
   std::vector<std::size_t> most(static_cast<std::size_t>(bodies.size()), 0);
   std::size_t steps_with_contacts = 0;
   for (int step = 0; step < 60; ++step) {
+    bool any = false;
     w.run(1, [&] {
       const auto& candidates = plugin.sensorWorld().lastResult().candidates;
       for (int b = 0; b < bodies.size(); ++b) {
@@ -143,11 +144,12 @@ TEST(Stats, ContactArraysHoldRoomForTheirCandidatesAndLittleMore) {
         const auto& list = bodies[b]->m_scontacts;
         EXPECT_GE(static_cast<std::size_t>(list.capacity()), need) << "body " << b << ", step " << step;
         EXPECT_LE(static_cast<std::size_t>(list.capacity()), m + m / 8) << "body " << b << ", step " << step;
-        steps_with_contacts += list.size() > 0;
+        any = any || list.size() > 0;
       }
     });
+    steps_with_contacts += any;
   }
-  EXPECT_GT(steps_with_contacts, 20u) << "the scene must make contacts for the test to mean anything";
+  EXPECT_GT(steps_with_contacts, 20u) << "the scene must make contacts in many steps for the test to mean anything";
 }
 
 TEST(Stats, SensorsStepEvenWhenNoSoftPairIsDispatched) {

@@ -15,7 +15,9 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <memory>
 #include <thread>
+#include <utility>
 #include <vector>
 
 namespace {
@@ -125,6 +127,55 @@ TEST(Threads, TwoThreadDispatchMatchesOneThreadBitForBit) {
   EXPECT_EQ(two.duplicates, 0u) << "each (node, face) at most once a step, whichever thread asks";
   EXPECT_EQ(two.contacts, one.contacts);
   EXPECT_EQ(two.hashes, one.hashes);
+}
+
+// A body that meets a participating body and one left to Bullet (setEnabled false) at once: the
+// two pairs, collided on two threads, both write the middle body's m_scontacts (the plugin's pair
+// and its room for them each step, Bullet's own test through the previous algorithm). The lock
+// must cover both; the ThreadSanitizer stage reports it if not. Which pair pushes first decides
+// the contacts' order, so only what does not depend on it is compared with a one-thread run.
+TEST(Threads, APluginPairAndABulletPairOnOneBodyFromTwoThreads) {
+  const auto runMixed = [](bool two_threads, std::vector<std::size_t>& contacts, int& on_two) {
+    TwoThreadDispatcher* threaded = nullptr;
+    psc_test::DispatcherFactory factory;
+    if (two_threads)
+      factory = [&](btCollisionConfiguration* config) {
+        auto dispatcher = std::make_unique<TwoThreadDispatcher>(config);
+        threaded = dispatcher.get();
+        return dispatcher;
+      };
+    psc_test::SoftWorld w(0.0, factory);
+    btSoftBody* middle = w.addSoft(psc::makeSphere(0.5, 200));
+    w.addSoft(psc::makeSphere(0.5, 200).translate({1.2, 0, 0}), {}, {-3, 0, 0});
+    btSoftBody* bullets = w.addSoft(psc::makeSphere(0.5, 200).translate({-1.2, 0.05, 0}), {}, {3, 0, 0});
+    auto plugin = psc::bullet::install(w.world);
+    plugin.setEnabled(bullets, false);
+    for (int s = 0; s < 12; ++s) {
+      std::size_t made = 0;
+      w.run(1, [&] { made = static_cast<std::size_t>(middle->m_scontacts.size()); });
+      EXPECT_TRUE(plugin.stats().error.empty()) << plugin.stats().error;
+      contacts.push_back(made);
+    }
+    EXPECT_GT(plugin.stats().fallback_pairs, 0u) << "the pair with the opted-out body is Bullet's";
+    EXPECT_GT(plugin.stats().contacts, 0u) << "the pair of participating bodies is the plugin's";
+    if (threaded != nullptr) on_two = threaded->steps_on_two_threads;
+  };
+  std::vector<std::size_t> one, two;
+  int one_on_two = 0, two_on_two = 0;
+  runMixed(false, one, one_on_two);
+  runMixed(true, two, two_on_two);
+  EXPECT_GT(two_on_two, 3) << "both threads must collide a pair in some steps";
+  std::size_t touching = 0;
+  for (std::size_t c : one) touching += c > 0;
+  EXPECT_GT(touching, 3u) << "the middle body must meet the others";
+  // The first step with contacts is the same in both: the positions before it do not depend on
+  // the order of contacts (there were none).
+  const auto first = [](const std::vector<std::size_t>& c) {
+    for (std::size_t i = 0; i < c.size(); ++i)
+      if (c[i] > 0) return std::make_pair(i, c[i]);
+    return std::make_pair(c.size(), std::size_t{0});
+  };
+  EXPECT_EQ(first(two), first(one));
 }
 
 }  // namespace
