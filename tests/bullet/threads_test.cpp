@@ -90,16 +90,20 @@ struct Trace {
   int steps_on_two_threads = 0;
 };
 
+/// With `two_threads`, a factory of TwoThreadDispatcher (the one made is kept in `threaded`);
+/// otherwise none (Bullet's dispatcher).
+psc_test::DispatcherFactory dispatcherFor(bool two_threads, TwoThreadDispatcher*& threaded) {
+  if (!two_threads) return {};
+  return [&threaded](btCollisionConfiguration* config) {
+    auto dispatcher = std::make_unique<TwoThreadDispatcher>(config);
+    threaded = dispatcher.get();
+    return dispatcher;
+  };
+}
+
 Trace run(bool two_threads, int steps) {
   TwoThreadDispatcher* threaded = nullptr;
-  psc_test::DispatcherFactory factory;
-  if (two_threads)
-    factory = [&](btCollisionConfiguration* config) {
-      auto dispatcher = std::make_unique<TwoThreadDispatcher>(config);
-      threaded = dispatcher.get();
-      return dispatcher;
-    };
-  psc_test::SoftWorld w(0.0, factory);
+  psc_test::SoftWorld w(0.0, dispatcherFor(two_threads, threaded));
   threePairs(w);
   auto plugin = psc::bullet::install(w.world);
   Trace trace;
@@ -137,14 +141,7 @@ TEST(Threads, TwoThreadDispatchMatchesOneThreadBitForBit) {
 TEST(Threads, APluginPairAndABulletPairOnOneBodyFromTwoThreads) {
   const auto runMixed = [](bool two_threads, std::vector<std::size_t>& contacts, int& on_two) {
     TwoThreadDispatcher* threaded = nullptr;
-    psc_test::DispatcherFactory factory;
-    if (two_threads)
-      factory = [&](btCollisionConfiguration* config) {
-        auto dispatcher = std::make_unique<TwoThreadDispatcher>(config);
-        threaded = dispatcher.get();
-        return dispatcher;
-      };
-    psc_test::SoftWorld w(0.0, factory);
+    psc_test::SoftWorld w(0.0, dispatcherFor(two_threads, threaded));
     btSoftBody* middle = w.addSoft(psc::makeSphere(0.5, 200));
     w.addSoft(psc::makeSphere(0.5, 200).translate({1.2, 0, 0}), {}, {-3, 0, 0});
     btSoftBody* bullets = w.addSoft(psc::makeSphere(0.5, 200).translate({-1.2, 0.05, 0}), {}, {3, 0, 0});
