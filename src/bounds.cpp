@@ -2533,13 +2533,13 @@ void cullAndCollect(const std::vector<Body*>& bodies, const BodyPairs& pairs, co
             [](const Group& x, const Group& y) { return x.vb != y.vb ? x.vb < y.vb : x.tb < y.tb; });
   std::size_t total = candidates.size();
   for (const Group& g : groups) total += g.keys.size();
-  if (total > candidates.capacity() && candidates.empty()) {
-    // Free the old block before taking the new one (a reserve holds both at once), and leave an
-    // eighth more room, so that counts growing from step to step do not reallocate every step.
-    candidates = std::vector<CandidatePair>();
+  if (total > candidates.capacity()) {
+    // An empty list's old block is freed before the new one is taken (a reserve holds both at
+    // once); an eighth more room, so that counts growing from step to step do not reallocate
+    // every step.
+    if (candidates.empty()) candidates = std::vector<CandidatePair>();
     candidates.reserve(total + total / 8);
   }
-  candidates.reserve(total);
   for (const Group& g : groups)
     for (std::uint64_t k : g.keys)
       candidates.push_back({g.vb, static_cast<Index>(k >> 32), g.tb, static_cast<Index>(k & 0xFFFFFFFFu)});

@@ -139,7 +139,8 @@ TEST(Threads, TwoThreadDispatchMatchesOneThreadBitForBit) {
 // must cover both; the ThreadSanitizer stage reports it if not. Which pair pushes first decides
 // the contacts' order, so only what does not depend on it is compared with a one-thread run.
 TEST(Threads, APluginPairAndABulletPairOnOneBodyFromTwoThreads) {
-  const auto runMixed = [](bool two_threads, std::vector<std::size_t>& contacts, int& on_two) {
+  // The middle body's contacts each step; returns the steps in which both threads collided.
+  const auto runMixed = [](bool two_threads, std::vector<std::size_t>& contacts) {
     TwoThreadDispatcher* threaded = nullptr;
     psc_test::SoftWorld w(0.0, dispatcherFor(two_threads, threaded));
     btSoftBody* middle = w.addSoft(psc::makeSphere(0.5, 200));
@@ -155,12 +156,11 @@ TEST(Threads, APluginPairAndABulletPairOnOneBodyFromTwoThreads) {
     }
     EXPECT_GT(plugin.stats().fallback_pairs, 0u) << "the pair with the opted-out body is Bullet's";
     EXPECT_GT(plugin.stats().contacts, 0u) << "the pair of participating bodies is the plugin's";
-    if (threaded != nullptr) on_two = threaded->steps_on_two_threads;
+    return threaded != nullptr ? threaded->steps_on_two_threads : 0;
   };
   std::vector<std::size_t> one, two;
-  int one_on_two = 0, two_on_two = 0;
-  runMixed(false, one, one_on_two);
-  runMixed(true, two, two_on_two);
+  runMixed(false, one);
+  const int two_on_two = runMixed(true, two);
   EXPECT_GT(two_on_two, 3) << "both threads must collide a pair in some steps";
   std::size_t touching = 0;
   for (std::size_t c : one) touching += c > 0;
