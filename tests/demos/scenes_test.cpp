@@ -411,6 +411,35 @@ TEST(Scenes, TheContinuousTestCutsTunnellingThroughTheCloth) {
   }
 }
 
+TEST(Scenes, FoundContactFiguresAreTheSameWithAndWithoutATruth) {
+  // Without a truth (and without frames) the demo counts the found contacts body by body and keeps
+  // no list of them; with one it keeps the list to compare. The figures taken from the contacts must
+  // not depend on which: their number, the runaway rule's pairs and the tunnelled vertices, step by
+  // step. fast_cloth at 400 vertices with one contact per node and Bullet's test has tunnelling and
+  // contacts in most steps (TheContinuousTestCutsTunnellingThroughTheCloth).
+  if (!SensorPipeline::available()) GTEST_SKIP() << "psc::bullet not built";
+  const Scene scene = sceneAt("fast_cloth", 400);
+  RunOptions o;
+  o.penetration = false;
+  o.contacts = "nearest";
+  o.truth = TruthMode::None;
+  const RunResult without = runPipeline(scene, Pipeline::Sensors, o);
+  o.truth = TruthMode::Strict;
+  const RunResult with = runPipeline(scene, Pipeline::Sensors, o);
+  ASSERT_EQ(without.per_step.size(), with.per_step.size());
+  EXPECT_GT(without.contacts_found_total, 0u);
+  EXPECT_GT(without.tunnelled_total, 0u) << "the scene no longer shows tunnelling";
+  EXPECT_EQ(without.contacts_found_total, with.contacts_found_total);
+  EXPECT_EQ(without.tunnelled_total, with.tunnelled_total);
+  EXPECT_EQ(without.tunnelled_worst_step, with.tunnelled_worst_step);
+  EXPECT_EQ(without.runaway_steps, with.runaway_steps);
+  for (std::size_t i = 0; i < with.per_step.size(); ++i) {
+    EXPECT_EQ(without.per_step[i].n.contacts_found, with.per_step[i].n.contacts_found) << "step " << i;
+    EXPECT_EQ(without.per_step[i].n.runaway_pairs, with.per_step[i].n.runaway_pairs) << "step " << i;
+    EXPECT_EQ(without.per_step[i].n.tunnelled_vertices, with.per_step[i].n.tunnelled_vertices) << "step " << i;
+  }
+}
+
 TEST(Scenes, HeadOnMeasurementChain) {
   // Long enough for the spheres to meet: every pipeline finds contacts, every contact is in the
   // truth, and the figures are printed for the record.
