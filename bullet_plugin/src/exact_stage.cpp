@@ -173,19 +173,42 @@ ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::
 }
 
 /// Robust's own contact at radius m, where Bullet skipped the face or an edge as too small, or
-/// found the node exactly on the face: the exact closest point in double.
+/// found the node exactly on the face: the closest point in single precision from Bullet's float
+/// positions (robust_kernel.h: relative to the triangle and the distance, at any scale), else,
+/// where that cannot hold, the exact closest point in double. With single-precision Bullet the
+/// single-precision part runs the operations of detail::robustLanes (vf_lanes.cpp), which decides
+/// most such pairs, so either gives the same contact bit for bit.
 ContactKind robustContact(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
                           btScalar m, btSoftBody::SContact& contact) {
+  if constexpr (sizeof(btScalar) == sizeof(float)) {
+    using F3 = detail::RobustV3<float>;
+    // Relative to the node (robust_kernel.h), as the lanes compute it: p = 0.
+    const btVector3& o = node.m_x;
+    const auto f3 = [&o](const btVector3& v) {
+      return F3{static_cast<float>(v.x() - o.x()), static_cast<float>(v.y() - o.y()), static_cast<float>(v.z() - o.z())};
+    };
+    const F3 p{0.0f, 0.0f, 0.0f}, a = f3(face.m_n[0]->m_x), b = f3(face.m_n[1]->m_x), c = f3(face.m_n[2]->m_x);
+    if (!detail::robustNeedsDouble(a, b, c)) {
+      float wa = 0.0f, wb = 0.0f, wc = 0.0f, distance2 = 0.0f;
+      detail::robustClosest(p, a, b, c, wa, wb, wc, distance2);
+      const auto radius = static_cast<float>(m);
+      if (!(distance2 < radius * radius)) return ContactKind::None;
+      F3 n;
+      if (!detail::robustNormal(p, a, b, c, wa, wb, wc, radius, float(detail::kSingleShort), n))
+        return fillContact(ctx, node, face, btVector3(wa, wb, wc), btVector3(n.x, n.y, n.z), m, contact)
+                   ? ContactKind::Robust
+                   : ContactKind::None;
+    }
+  }
   const Vec3 po = toVec(node.m_x), a = toVec(face.m_n[0]->m_x), b = toVec(face.m_n[1]->m_x),
              c = toVec(face.m_n[2]->m_x);
   const ClosestPoint cp = closestPointOnTriangle(po, a, b, c);
   const double radius = double(m);
   if (!(cp.distance2 < radius * radius)) return ContactKind::None;
-  // The same operations as detail::robustLanes (vf_lanes.cpp), which decides most such pairs.
   using detail::robustV3;
   detail::RobustV3<double> n;
   const bool short_away = detail::robustNormal(robustV3(po), robustV3(a), robustV3(b), robustV3(c), cp.weights[0],
-                                               cp.weights[1], cp.weights[2], radius, n);
+                                               cp.weights[1], cp.weights[2], radius, detail::kDoubleShort, n);
   const Vec3 normal = short_away ? normalWithoutDistance(node, face, cp.weights) : Vec3(n.x, n.y, n.z);
   const btVector3 w{btScalar(cp.weights[0]), btScalar(cp.weights[1]), btScalar(cp.weights[2])};
   return fillContact(ctx, node, face, w, toBt(normal), m, contact) ? ContactKind::Robust : ContactKind::None;

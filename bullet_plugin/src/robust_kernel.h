@@ -1,9 +1,20 @@
-// Private: the arithmetic of Robust's own contact (the exact closest point of a triangle, in
-// double, and the contact's unit normal) and the first part of Continuous's crossing test
-// (crossingRuledOut), written once for any "real" type R: plain double in
-// exact_geometry.cpp and exact_stage.cpp, four AVX lanes of doubles in vf_lanes.cpp. Both see the
-// same operations in the same order (no FMA: the build does not enable it), so a lane's result is
-// the scalar one bit for bit; tests/bullet/exact_test.cpp (LanesAreBulletsTestBitForBit) checks it.
+// Private: the arithmetic of Robust's own contact (the closest point of a triangle and the
+// contact's unit normal) and the first part of Continuous's crossing test (crossingRuledOut),
+// written once for any "real" type R: plain float and double in exact_stage.cpp and
+// exact_geometry.cpp, eight AVX lanes of floats and four of doubles in vf_lanes.cpp. A lane and its
+// scalar form see the same operations in the same order (no FMA: the build does not enable it), so
+// a lane's result is the scalar one bit for bit; tests/bullet/exact_test.cpp
+// (LanesAreBulletsTestBitForBit) checks it.
+//
+// Robust's contact is first computed in single precision, from Bullet's float positions taken
+// relative to the node (the corners minus the node, p = 0: exact for a corner within a factor of
+// two of the node's coordinates, as Bullet's own test takes them), so every quantity is a
+// difference of nearby positions or a product of such differences and its rounding is relative to
+// the triangle and the distance, not to where they are (a small triangle far from the origin keeps
+// its relative precision). Where single precision cannot hold that (a sliver, a triangle below 1e-6
+// or above 1e6 in size, a node within a hundredth of the radius of the face), robustNeedsDouble or
+// robustNormal's `short` sends the pair to the double path: the exact closest point
+// (closestPointOnTriangle).
 //
 // Branches become selections: every region of the triangle (Ericson, Real-Time Collision
 // Detection §5.1.5) gets its weights computed, and the first region whose condition holds, in
@@ -37,11 +48,32 @@ inline bool lt(double a, double b) { return a < b; }
 inline bool both(bool a, bool b) { return a && b; }
 inline bool either(bool a, bool b) { return a || b; }
 inline double select(bool m, double if_true, double if_false) { return m ? if_true : if_false; }
+// ... and in single precision (robustContact's first path), with no promotion to double.
+inline bool le(float a, float b) { return a <= b; }
+inline bool ge(float a, float b) { return a >= b; }
+inline bool gt(float a, float b) { return a > b; }
+inline bool notGreater(float a, float b) { return !(a > b); }
+inline bool lt(float a, float b) { return a < b; }
+inline float select(bool m, float if_true, float if_false) { return m ? if_true : if_false; }
 using std::sqrt;
 
 /// A triangle is reduced to its edges when |ab × ac|² ≤ this × (longest edge²)², i.e. its height
 /// is below 1e-12 of its longest edge: the same rule as the demo's ground truth.
 constexpr double kDegenerateRelative = 1e-24;
+
+/// Single precision leaves a triangle to the double path when |ab × ac|² ≤ this × (longest edge²)²,
+/// i.e. its height is below about 3% of its longest edge: the region weights' rounding grows as
+/// (longest / height)², about 2.4e-4 of the triangle at this bound, far inside the ground truth's
+/// band.
+constexpr double kSingleThin = 1e-3;
+/// ... and when its longest edge² lies outside [this, 1 / this]: the fourth powers above stay
+/// within float's normal range.
+constexpr double kSingleSmallest2 = 1e-12;
+/// A node nearer its closest point than this fraction of the radius has its normal from the double
+/// path in single precision (in double: robustNormal's kDoubleShort): the face point's rounding,
+/// relative to the coordinates, would turn the direction.
+constexpr double kSingleShort = 1e-2;
+constexpr double kDoubleShort = 1e-9;
 
 template <class R>
 struct RobustV3 {
@@ -122,25 +154,46 @@ template <class R>
   distance2 = dot3(d, d);
 }
 
+/// |ab × ac|² and the longest edge² of the triangle (a, b, c).
+template <class R>
+[[gnu::always_inline]] inline void robustShape(const RobustV3<R>& a, const RobustV3<R>& b, const RobustV3<R>& c,
+                                               R& n2, R& longest2) {
+  const RobustV3<R> ab = minus(b, a), ac = minus(c, a), bc = minus(c, b), ca = minus(a, c);
+  const RobustV3<R> n{ab.y * ac.z - ab.z * ac.y, ab.z * ac.x - ab.x * ac.z, ab.x * ac.y - ab.y * ac.x};
+  n2 = dot3(n, n);
+  const R l_ab = dot3(ab, ab), l_bc = dot3(bc, bc), l_ca = dot3(ca, ca);
+  const R l2 = select(gt(l_bc, l_ab), l_bc, l_ab);
+  longest2 = select(gt(l_ca, l2), l_ca, l2);
+}
+
 /// Whether the triangle is reduced to its edges (kDegenerateRelative).
 template <class R>
 [[gnu::always_inline]] inline auto robustDegenerate(const RobustV3<R>& a, const RobustV3<R>& b,
                                                     const RobustV3<R>& c) {
-  const RobustV3<R> ab = minus(b, a), ac = minus(c, a), bc = minus(c, b), ca = minus(a, c);
-  const RobustV3<R> n{ab.y * ac.z - ab.z * ac.y, ab.z * ac.x - ab.x * ac.z, ab.x * ac.y - ab.y * ac.x};
-  const R n2 = dot3(n, n);
-  const R l_ab = dot3(ab, ab), l_bc = dot3(bc, bc), l_ca = dot3(ca, ca);
-  const R l2 = select(gt(l_bc, l_ab), l_bc, l_ab);
-  const R longest = select(gt(l_ca, l2), l_ca, l2);
+  R n2, longest;
+  robustShape(a, b, c, n2, longest);
   return notGreater(n2, R(kDegenerateRelative) * longest * longest);
+}
+
+/// Whether the single-precision path leaves the triangle to the double one (kSingleThin,
+/// kSingleSmallest2); a NaN in a corner leaves it too.
+template <class R>
+[[gnu::always_inline]] inline auto robustNeedsDouble(const RobustV3<R>& a, const RobustV3<R>& b,
+                                                     const RobustV3<R>& c) {
+  R n2, longest;
+  robustShape(a, b, c, n2, longest);
+  // notGreater holds for a NaN (a NaN corner makes n2 one).
+  return either(either(notGreater(n2, R(kSingleThin) * longest * longest), notGreater(longest, R(kSingleSmallest2))),
+                gt(longest, R(1.0 / kSingleSmallest2)));
 }
 
 /// The contact's direction: p minus the face point at weights (wa, wb, wc), evaluated as the face
 /// point is, from zero, corner by corner; its length, and the unit normal away · (1 / length). `short`
-/// holds where the length is at most 1e-9 of the radius: there the normal is the caller's to find.
+/// holds where the length is at most `short_fraction` of the radius (kSingleShort, kDoubleShort):
+/// there the normal is the caller's to find.
 template <class R>
 [[gnu::always_inline]] inline auto robustNormal(const RobustV3<R>& p, const RobustV3<R>& a, const RobustV3<R>& b,
-                                                const RobustV3<R>& c, R wa, R wb, R wc, R radius,
+                                                const RobustV3<R>& c, R wa, R wb, R wc, R radius, R short_fraction,
                                                 RobustV3<R>& normal) {
   const R zero(0.0);
   const RobustV3<R> f{((zero + wa * a.x) + wb * b.x) + wc * c.x, ((zero + wa * a.y) + wb * b.y) + wc * c.y,
@@ -149,7 +202,7 @@ template <class R>
   const R length = sqrt(dot3(away, away));
   const R inverse = R(1.0) / length;
   normal = {away.x * inverse, away.y * inverse, away.z * inverse};
-  return notGreater(length, R(1e-9) * radius);
+  return notGreater(length, short_fraction * radius);
 }
 
 template <class R>

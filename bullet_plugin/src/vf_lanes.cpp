@@ -178,7 +178,7 @@ PSC_AVX __m256 contactMixing(const VfLanesIn& in, __m256 wx, __m256 wy, __m256 w
 }  // namespace psc::bullet::detail
 
 #if defined(PSC_HAVE_VF_LANES)
-// robust_kernel.h's templates over four lanes of doubles. Everything they call must be compiled
+// robust_kernel.h's templates over eight lanes of floats and four of doubles. Everything they call must be compiled
 // for AVX, the templates included: so the header is read with AVX as this region's target (GCC's
 // pragma; clang's attribute region does the same).
 #if defined(__clang__)
@@ -215,6 +215,32 @@ PSC_AVX D4 select(M4 m, D4 if_true, D4 if_false) {  // as pick above: no blendv
   return _mm256_or_pd(_mm256_and_pd(m.m, if_true.v), _mm256_andnot_pd(m.m, if_false.v));
 }
 
+/// Eight lanes of floats, the same operations as D4 (Robust's single-precision contact).
+struct F8 {
+  __m256 v;
+  F8() = default;
+  PSC_AVX F8(__m256 x) : v(x) {}                                        // NOLINT(google-explicit-constructor)
+  PSC_AVX F8(double x) : v(_mm256_set1_ps(static_cast<float>(x))) {}  // NOLINT(google-explicit-constructor)
+};
+struct M8 {
+  __m256 m;
+};
+PSC_AVX F8 operator+(F8 a, F8 b) { return _mm256_add_ps(a.v, b.v); }
+PSC_AVX F8 operator-(F8 a, F8 b) { return _mm256_sub_ps(a.v, b.v); }
+PSC_AVX F8 operator*(F8 a, F8 b) { return _mm256_mul_ps(a.v, b.v); }
+PSC_AVX F8 operator/(F8 a, F8 b) { return _mm256_div_ps(a.v, b.v); }
+PSC_AVX F8 sqrt(F8 a) { return _mm256_sqrt_ps(a.v); }
+PSC_AVX M8 le(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_LE_OQ)}; }
+PSC_AVX M8 ge(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GE_OQ)}; }
+PSC_AVX M8 gt(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_GT_OQ)}; }
+PSC_AVX M8 lt(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_LT_OQ)}; }
+PSC_AVX M8 notGreater(F8 a, F8 b) { return {_mm256_cmp_ps(a.v, b.v, _CMP_NGT_UQ)}; }  // !(a > b)
+PSC_AVX M8 both(M8 a, M8 b) { return {_mm256_and_ps(a.m, b.m)}; }
+PSC_AVX M8 either(M8 a, M8 b) { return {_mm256_or_ps(a.m, b.m)}; }
+PSC_AVX F8 select(M8 m, F8 if_true, F8 if_false) {  // as pick above: no blendv
+  return _mm256_or_ps(_mm256_and_ps(m.m, if_true.v), _mm256_andnot_ps(m.m, if_false.v));
+}
+
 }  // namespace
 }  // namespace psc::bullet::detail
 
@@ -225,38 +251,34 @@ namespace {
 
 /// Lanes [from, from + 4) of a float array, as doubles (exactly).
 PSC_AVX D4 widen(const float* lanes, int from) { return _mm256_cvtps_pd(_mm_load_ps(lanes + from)); }
-PSC_AVX void narrow(D4 x, float* lanes, int from) { _mm_store_ps(lanes + from, _mm256_cvtpd_ps(x.v)); }
 
 void robustLanesAvx(const VfLanesIn& in, const float* margin, std::uint32_t lanes, float kshr0, float kshr1,
                     RobustLanesOut& out) {
-  std::uint32_t scalar = 0, inside = 0;
-  for (int from = 0; from < kVfLanes; from += 4) {
-    if (((lanes >> from) & 0xFu) == 0) continue;
-    const RobustV3<D4> p{widen(in.ox, from), widen(in.oy, from), widen(in.oz, from)};
-    const RobustV3<D4> a{widen(in.ax, from), widen(in.ay, from), widen(in.az, from)};
-    const RobustV3<D4> b{widen(in.bx, from), widen(in.by, from), widen(in.bz, from)};
-    const RobustV3<D4> c{widen(in.cx, from), widen(in.cy, from), widen(in.cz, from)};
-    const M4 degenerate = robustDegenerate(a, b, c);
-    D4 wa, wb, wc, distance2;
-    robustClosest(p, a, b, c, wa, wb, wc, distance2);
-    const D4 radius = widen(margin, from);
-    const M4 within = lt(distance2, radius * radius);
-    RobustV3<D4> n;
-    const M4 short_away = robustNormal(p, a, b, c, wa, wb, wc, radius, n);
-    narrow(wa, out.wx, from);
-    narrow(wb, out.wy, from);
-    narrow(wc, out.wz, from);
-    narrow(n.x, out.nx, from);
-    narrow(n.y, out.ny, from);
-    narrow(n.z, out.nz, from);
-    scalar |= static_cast<std::uint32_t>(_mm256_movemask_pd(_mm256_or_pd(degenerate.m, short_away.m))) << from;
-    inside |= static_cast<std::uint32_t>(_mm256_movemask_pd(within.m)) << from;
-  }
+  // Robust's single-precision contact (robust_kernel.h) in all eight lanes at once: one pass of
+  // floats instead of up to two of four doubles, the lanes' own bits kept at the end.
+  // Relative to the node (robustSingleFrame): p = 0.
+  const RobustV3<F8> o{_mm256_load_ps(in.ox), _mm256_load_ps(in.oy), _mm256_load_ps(in.oz)};
+  const RobustV3<F8> p{_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps()};
+  const RobustV3<F8> a = minus(RobustV3<F8>{_mm256_load_ps(in.ax), _mm256_load_ps(in.ay), _mm256_load_ps(in.az)}, o);
+  const RobustV3<F8> b = minus(RobustV3<F8>{_mm256_load_ps(in.bx), _mm256_load_ps(in.by), _mm256_load_ps(in.bz)}, o);
+  const RobustV3<F8> c = minus(RobustV3<F8>{_mm256_load_ps(in.cx), _mm256_load_ps(in.cy), _mm256_load_ps(in.cz)}, o);
+  const M8 needs_double = robustNeedsDouble(a, b, c);
+  F8 wa, wb, wc, distance2;
+  robustClosest(p, a, b, c, wa, wb, wc, distance2);
+  const F8 radius{_mm256_load_ps(margin)};
+  const M8 within = lt(distance2, radius * radius);
+  RobustV3<F8> n;
+  const M8 short_away = robustNormal(p, a, b, c, wa, wb, wc, radius, F8(kSingleShort), n);
+  _mm256_store_ps(out.wx, wa.v);
+  _mm256_store_ps(out.wy, wb.v);
+  _mm256_store_ps(out.wz, wc.v);
+  _mm256_store_ps(out.nx, n.x.v);
+  _mm256_store_ps(out.ny, n.y.v);
+  _mm256_store_ps(out.nz, n.z.v);
   // fillContact's masses and constraint mixing at these weights, as lanesAvx has them for Bullet's.
-  const __m256 moves = contactMixing(in, _mm256_load_ps(out.wx), _mm256_load_ps(out.wy), _mm256_load_ps(out.wz),
-                                     kshr0, kshr1, out.cfm0, out.cfm1);
-  out.scalar = scalar;
-  out.inside = inside;
+  const __m256 moves = contactMixing(in, wa.v, wb.v, wc.v, kshr0, kshr1, out.cfm0, out.cfm1);
+  out.scalar = static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_or_ps(needs_double.m, short_away.m))) & lanes;
+  out.inside = static_cast<std::uint32_t>(_mm256_movemask_ps(within.m)) & lanes;
   out.moves = static_cast<std::uint32_t>(_mm256_movemask_ps(moves));
 }
 

@@ -50,15 +50,16 @@ struct VfLanesOut {
   std::uint32_t robust = 0;
 };
 
-/// Robust's own contact (robustContact in exact_stage.cpp) for eight lanes, in double, with the
-/// operations of robust_kernel.h, which the scalar test runs too: so each lane's weights and normal
-/// are the scalar test's, bit for bit.
+/// Robust's own contact (robustContact in exact_stage.cpp) for eight lanes, its single-precision
+/// part, with the operations of robust_kernel.h, which the scalar test runs too: so each lane's
+/// weights and normal are the scalar test's, bit for bit.
 struct RobustLanesOut {
   alignas(32) float wx[kVfLanes], wy[kVfLanes], wz[kVfLanes];  ///< the closest point's weights
   alignas(32) float nx[kVfLanes], ny[kVfLanes], nz[kVfLanes];  ///< the unit normal, face to node
   alignas(32) float cfm0[kVfLanes], cfm1[kVfLanes];            ///< m_cfm at these weights (VfLanesOut's)
-  /// Bit i: lane i needs the scalar test: its face is degenerate (reduced to its edges there), or
-  /// the node lies on the face (no direction from the distance).
+  /// Bit i: lane i needs the scalar test, whose double path decides it: its face is too thin, too
+  /// small or too large for single precision (robustNeedsDouble), or the node lies within a
+  /// hundredth of the radius of its closest point (kSingleShort).
   std::uint32_t scalar = 0;
   /// Bit i: the closest point lies within lane i's radius (margin[i]).
   std::uint32_t inside = 0;
@@ -67,9 +68,9 @@ struct RobustLanesOut {
 };
 
 /// Runs the lanes whose bits are set in `lanes` (VfLanesOut::robust) at radii `margin`
-/// (VfLanesOut::margin), four at a time: a half of the eight without such a lane is skipped, and
-/// its bits in `out` are 0 (cfm0, cfm1 and `moves` are computed for all eight). `kshr0` / `kshr1`
-/// as for vfLanes. Only call when vfLanesEnabled().
+/// (VfLanesOut::margin), all eight in one pass; the bits of the other lanes in `out.scalar` and
+/// `out.inside` are 0 (cfm0, cfm1 and `moves` are computed for all eight). `kshr0` / `kshr1` as
+/// for vfLanes. Only call when vfLanesEnabled().
 void robustLanes(const VfLanesIn& in, const float* margin, std::uint32_t lanes, float kshr0, float kshr1,
                  RobustLanesOut& out);
 

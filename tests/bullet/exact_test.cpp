@@ -340,6 +340,70 @@ TEST(ExactTests, RobustFindsTheExactContactOnSmallFacesAtAnyScale) {
   EXPECT_GT(robust_kind, 1000u);
 }
 
+TEST(ExactTests, RobustsSinglePrecisionContactIsTheExactOneToWithinItsRounding) {
+  // Robust's own contact is computed in single precision relative to the node (robust_kernel.h),
+  // the double path taking what single precision cannot hold. Against the exact closest point in
+  // double (closestPointOnTriangle) of the same float positions, on small faces Bullet refuses, far
+  // from the origin too (up to 300 units, where a float's step is 3e-5, six thousandths of the
+  // faces' size): the contact point's weights lie within 2.5e-4 of the exact ones (the region
+  // weights' rounding at kSingleThin, the worst a face left to single precision can have),
+  // whatever the offset; the normal within 1e-3 of the direction from the exact point to the node
+  // (which lies at least kSingleShort of the radius from its face there). Slivers (height 1e-4 of
+  // the longest edge) go to the double path: their weights are the exact ones rounded to float.
+  std::mt19937_64 rng(2039);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  double worst_point = 0.0, worst_normal = 0.0;
+  std::size_t contacts = 0, slivers = 0;
+  for (int i = 0; i < 6000; ++i) {
+    PairRig rig;
+    const double size = 0.005;
+    randomPair(rig, rng, size, 0.01);
+    const bool sliver = i % 6 == 5;
+    if (sliver) {
+      // The third corner 1e-4 of the edge ab off its line, the node above the sliver's inside
+      // (where its weights are the worst conditioned).
+      const Vec3 a = toVec(rig.face().m_n[0]->m_x), b = toVec(rig.face().m_n[1]->m_x);
+      const Vec3 off = (b - a).cross(randomUnit(rng)).normalized() * 1e-4 * (b - a).norm();
+      const Vec3 c = a + (0.2 + 0.6 * u(rng)) * (b - a) + off;
+      rig.face_body.m_nodes[2].m_x = toBt(c);
+      const Vec3 inside = (a + b + c) / 3.0, normal = (b - a).cross(c - a).normalized();
+      rig.node().m_x = toBt(inside + normal * 0.004 * (u(rng) - 0.5));
+      rig.node().m_q = rig.node().m_x;
+    }
+    const double offsets[] = {0.0, 10.0, 300.0};
+    const Vec3 shift = randomUnit(rng) * offsets[i % 3];
+    for (int k = 0; k < 3; ++k) rig.face_body.m_nodes[k].m_x = toBt(toVec(rig.face_body.m_nodes[k].m_x) + shift);
+    rig.node().m_x = toBt(toVec(rig.node().m_x) + shift);
+    rig.node().m_q = toBt(toVec(rig.node().m_q) + shift);
+    btSoftBody::SContact contact{};
+    const ContactKind kind = rig.run(ExactTest::Robust, contact);
+    // The reference reads the positions back after the plugin's call (within this file the compiler
+    // may carry a position's double value past its rounding to float into Bullet's vector).
+    const Vec3 p = toVec(rig.node().m_x), a = toVec(rig.face().m_n[0]->m_x), b = toVec(rig.face().m_n[1]->m_x),
+               c = toVec(rig.face().m_n[2]->m_x);
+    const psc::bullet::ClosestPoint exact = psc::bullet::closestPointOnTriangle(p, a, b, c);
+    const double r = rig.radius(), d = std::sqrt(exact.distance2);
+    if (std::abs(d - r) < 1e-4 * r || d < 0.05 * r) continue;  // the decision's edge; a normal from elsewhere
+    if (kind != ContactKind::Robust) continue;  // Bullet's own contact (bit for bit: other tests), or none
+    ++contacts;
+    slivers += sliver;
+    // The weights (the point relative to the face: evaluated from the corners' coordinates, a
+    // weight's float rounding alone moves it by 6e-8 of the coordinates).
+    double point_error = 0.0;
+    for (int k = 0; k < 3; ++k) point_error = std::max(point_error, std::abs(double(contact.m_weights[k]) - exact.weights[k]));
+    worst_point = std::max(worst_point, point_error);
+    EXPECT_LT(point_error, sliver ? 1e-6 : 2.5e-4) << (sliver ? "sliver " : "pair ") << i;
+    const Vec3 q = a * exact.weights[0] + b * exact.weights[1] + c * exact.weights[2];
+    const double normal_error = (toVec(contact.m_normal) - (p - q).normalized()).norm();
+    worst_normal = std::max(worst_normal, normal_error);
+    EXPECT_LT(normal_error, 1e-3) << "pair " << i << " distance / radius " << d / r;
+  }
+  std::printf("Robust's own contacts: %zu (%zu on slivers); worst weight error %.3g, worst normal error %.3g\n", contacts,
+              slivers, worst_point, worst_normal);
+  EXPECT_GT(contacts, 1500u);
+  EXPECT_GT(slivers, 200u);
+}
+
 TEST(ExactTests, RobustGivesANodeOnTheFaceAFiniteNormal) {
   PairRig rig;
   rig.setMargins(0.01, 0.01);

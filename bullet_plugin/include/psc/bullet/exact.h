@@ -29,7 +29,7 @@ ExactTest exactTestFromString(const std::string& text);
 enum class ContactKind {
   None,      ///< no contact
   Bullet,    ///< CollideVF_SS's own contact (bit for bit)
-  Robust,    ///< Bullet refused or had no finite normal; the exact closest point in double
+  Robust,    ///< Bullet refused or had no finite normal; the closest point (ExactTest::Robust)
   Crossing,  ///< Continuous: the node passed through the face during the step
 };
 

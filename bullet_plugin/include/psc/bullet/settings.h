@@ -28,8 +28,11 @@ enum class ExactTest {
   Bullet,
   /// Bullet's contact, bit for bit, wherever CollideVF_SS accepts the pair (except that a node
   /// lying exactly on the face gets a finite normal instead of Bullet's 0/0); where Bullet's
-  /// arithmetic skipped the face or an edge as too small, the exact closest point computed in
-  /// double with relative thresholds, so no contact depends on the unit of length.
+  /// arithmetic skipped the face or an edge as too small, the closest point computed relative to
+  /// the node with relative thresholds, so no contact depends on the unit of length or on where
+  /// the bodies are: in single precision with single-precision Bullet (rounded relative to the face
+  /// and the distance), in double (exact) for slivers, tiny or huge faces and nodes almost on the
+  /// face, and with double-precision Bullet.
   Robust,
   /// Robust's test (Bullet's radius, margins + 2·|m_x − m_q|), plus a continuous test over the
   /// step (m_q → m_x, linear motion of the node and of the face's nodes): a node that passes
