@@ -178,9 +178,9 @@ PSC_AVX __m256 contactMixing(const VfLanesIn& in, __m256 wx, __m256 wy, __m256 w
 }  // namespace psc::bullet::detail
 
 #if defined(PSC_HAVE_VF_LANES)
-// robust_kernel.h's templates over eight lanes of floats and four of doubles. Everything they call must be compiled
-// for AVX, the templates included: so the header is read with AVX as this region's target (GCC's
-// pragma; clang's attribute region does the same).
+// robust_kernel.h's templates over eight lanes of floats and four of doubles. Everything they call
+// must be compiled for AVX, the templates included: so the header is read with AVX as this
+// region's target (GCC's pragma; clang's attribute region does the same).
 #if defined(__clang__)
 #pragma clang attribute push(__attribute__((target("avx"))), apply_to = function)
 #else
@@ -255,8 +255,8 @@ PSC_AVX D4 widen(const float* lanes, int from) { return _mm256_cvtps_pd(_mm_load
 void robustLanesAvx(const VfLanesIn& in, const float* margin, std::uint32_t lanes, float kshr0, float kshr1,
                     RobustLanesOut& out) {
   // Robust's single-precision contact (robust_kernel.h) in all eight lanes at once: one pass of
-  // floats instead of up to two of four doubles, the lanes' own bits kept at the end.
-  // Relative to the node (robustSingleFrame): p = 0.
+  // floats instead of up to two of four doubles, the lanes' own bits kept at the end. The corners
+  // relative to the node, as robustContact takes them: p = 0.
   const RobustV3<F8> o{_mm256_load_ps(in.ox), _mm256_load_ps(in.oy), _mm256_load_ps(in.oz)};
   const RobustV3<F8> p{_mm256_setzero_ps(), _mm256_setzero_ps(), _mm256_setzero_ps()};
   const RobustV3<F8> a = minus(RobustV3<F8>{_mm256_load_ps(in.ax), _mm256_load_ps(in.ay), _mm256_load_ps(in.az)}, o);
