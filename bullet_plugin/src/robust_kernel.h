@@ -34,27 +34,30 @@
 
 #include <cmath>
 #include <limits>
+#include <type_traits>
 
 namespace psc::bullet::detail {
 namespace {
 
-// The scalar forms of the operations (before the templates: for double, a template's calls find
-// only what is declared where it is defined).
-inline bool le(double a, double b) { return a <= b; }
-inline bool ge(double a, double b) { return a >= b; }
-inline bool gt(double a, double b) { return a > b; }
-inline bool notGreater(double a, double b) { return !(a > b); }
-inline bool lt(double a, double b) { return a < b; }
+// The scalar forms of the operations, for float (robustContact's first path, with no promotion
+// to double) and double (before the templates: for those, a template's calls find only what is
+// declared where it is defined).
+template <class T>
+using Scalar = std::enable_if_t<std::is_floating_point_v<T>, T>;
+template <class T>
+inline bool le(T a, Scalar<T> b) { return a <= b; }
+template <class T>
+inline bool ge(T a, Scalar<T> b) { return a >= b; }
+template <class T>
+inline bool gt(T a, Scalar<T> b) { return a > b; }
+template <class T>
+inline bool notGreater(T a, Scalar<T> b) { return !(a > b); }
+template <class T>
+inline bool lt(T a, Scalar<T> b) { return a < b; }
 inline bool both(bool a, bool b) { return a && b; }
 inline bool either(bool a, bool b) { return a || b; }
-inline double select(bool m, double if_true, double if_false) { return m ? if_true : if_false; }
-// ... and in single precision (robustContact's first path), with no promotion to double.
-inline bool le(float a, float b) { return a <= b; }
-inline bool ge(float a, float b) { return a >= b; }
-inline bool gt(float a, float b) { return a > b; }
-inline bool notGreater(float a, float b) { return !(a > b); }
-inline bool lt(float a, float b) { return a < b; }
-inline float select(bool m, float if_true, float if_false) { return m ? if_true : if_false; }
+template <class T>
+inline T select(bool m, T if_true, Scalar<T> if_false) { return m ? if_true : if_false; }
 using std::sqrt;
 
 /// A triangle is reduced to its edges when |ab × ac|² ≤ this × (longest edge²)², i.e. its height
