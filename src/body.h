@@ -185,7 +185,9 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
 
 /// Shape figures measured during a refit (Body::shape): what the repartition check needs.
 struct ShapeFigures {
-  std::vector<double> region_area;  ///< area of the triangles owned by each region's chunks
+  std::vector<double> region_area;  ///< area of the triangles owned by each region's chunks (estimated
+                                    ///< from a sample of them by a sampled measure: refitBounds)
+  std::vector<double> chunk_area;   ///< with a full measure, each chunk's (empty otherwise)
   double max_edge = 0.0;            ///< longest triangle edge
 };
 
@@ -282,6 +284,8 @@ struct Body {
   double mean_edge = 0.0;              ///< at (re)partitioning: μ's geometric base
   double max_edge = 0.0;               ///< at (re)partitioning: the stretch trigger's base
   double area_star = 0.0;              ///< A*: largest region area at (re)partitioning
+  /// Each chunk's area at (re)partitioning: the reference of the checks' sampled region areas.
+  std::vector<double> chunk_area_ref;
   std::size_t repartitions = 0;
   std::uint64_t partition_number = 0;  ///< unique in the world for each (re)partitioning
   int steps_since_check = 0;
@@ -291,7 +295,7 @@ struct Body {
   std::vector<MotionBox> chunk_box;
   std::vector<MotionBox> region_box;
   MotionBox body_box;
-  ShapeFigures shape;  ///< filled by refitBounds(b, true)
+  ShapeFigures shape;  ///< filled by refitBounds with a measure
   /// SensorWorld::refitNow refit the boxes for the coming step(), which then skips the body's refit;
   /// anything that changes what the refit reads (positions, self-collision) clears it.
   bool refit_ahead = false;

@@ -385,11 +385,11 @@ bool useAvx2Probes() { return g_avx2_allowed.load(std::memory_order_relaxed) && 
   return _mm256_setr_pd(row[at[0]], row[at[1]], row[at[2]], row[at[3]]);
 }
 
-/// measureChunk on single-precision packed positions, four triangles at a time (AVX2, chosen at
-/// run time). The chunk's vertex table is first read into `table` (x, y, z rows in double), so
+/// measureChunk on single-precision positions (`stride` bytes apart), four triangles at a time
+/// (AVX2, chosen at run time). The chunk's vertex table is first read into `table` (x, y, z rows in double), so
 /// each corner is one load from there; each lane does measureChunk's operations in its order, and
 /// the areas are added one by one in the triangles' order: the same bits.
-[[gnu::target("avx2")]] void measureChunkAvx2(const ChunkLists& ch, Index chunk, const float* copy,
+[[gnu::target("avx2")]] void measureChunkAvx2(const ChunkLists& ch, Index chunk, const char* base, std::size_t stride,
                                               std::vector<double>& table, double& area, double& max_edge2) {
   using V = __m256d;
   const Index* t = ch.table.data() + ch.table_begin[chunk];
@@ -399,7 +399,7 @@ bool useAvx2Probes() { return g_avx2_allowed.load(std::memory_order_relaxed) && 
   double* ty = tx + n;
   double* tz = ty + n;
   for (std::size_t i = 0; i < n; ++i) {
-    const float* p = copy + 3 * std::size_t{t[i]};
+    const float* p = reinterpret_cast<const float*>(base + std::size_t{t[i]} * stride);
     tx[i] = p[0];
     ty[i] = p[1];
     tz[i] = p[2];
@@ -740,11 +740,82 @@ void finishRestFit(Body& b) {
   f.filled = true;
 }
 
+/// b.shape from the positions at `base` (`stride` bytes apart).
+///
+/// Full: every chunk's area (b.shape.chunk_area), each region's the sum of its chunks' in their
+/// order, and the longest edge of every triangle. Sampled (a check after the body's partitioning
+/// kept a full measure's chunk areas in b.chunk_area_ref): only every k-th chunk of a region is
+/// read, k = its chunk count / `sample_chunks` (at least 1), and the region's area is their sum
+/// now times the region's area over theirs at that measure, a ratio estimator: exact for a region
+/// that stretches evenly, and the very sum, to the bit, where k is 1. max_edge is then the sampled
+/// chunks'. Without a reference of the right size every chunk is read.
+void measureRegions(Body& b, Measure how, const char* base, std::size_t stride, bool is_float) {
+  const ChunkLists& ch = b.chunks;
+  const bool full = how.kind == Measure::Full || b.chunk_area_ref.size() != ch.count();
+  double max_edge2 = 0.0;
+#if defined(PSC_HAVE_AVX2_PATH)
+  const bool avx2 = is_float && useAvx2Probes();
+#else
+  const bool avx2 = false;
+#endif
+  thread_local std::vector<double> table;
+  const auto chunkArea = [&](Index c) {
+    double area = 0.0;
+#if defined(PSC_HAVE_AVX2_PATH)
+    if (avx2) {
+      measureChunkAvx2(ch, c, base, stride, table, area, max_edge2);
+      return area;
+    }
+#endif
+    if (is_float)
+      measureChunk<float>(ch, c, base, stride, area, max_edge2);
+    else
+      measureChunk<double>(ch, c, base, stride, area, max_edge2);
+    return area;
+  };
+  if (full) {
+    b.shape.chunk_area.resize(ch.count());
+    for (Index r = 0; r < b.regionCount(); ++r) {
+      double area = 0.0;
+      for (Index c = ch.region_begin[r]; c < ch.region_begin[r + 1]; ++c) area += b.shape.chunk_area[c] = chunkArea(c);
+      b.shape.region_area[r] = area;
+    }
+  } else {
+    b.shape.chunk_area.clear();
+    for (Index r = 0; r < b.regionCount(); ++r) {
+      const Index first = ch.region_begin[r], end = ch.region_begin[r + 1];
+      const std::size_t k = how.sample_chunks == 0 ? 1 : std::max<std::size_t>(1, (end - first) / how.sample_chunks);
+      double now = 0.0, then = 0.0, whole = 0.0;
+      for (Index c = first; c < end; c += static_cast<Index>(k)) {
+        now += chunkArea(c);
+        then += b.chunk_area_ref[c];
+      }
+      if (k == 1) {
+        b.shape.region_area[r] = now;
+        continue;
+      }
+      for (Index c = first; c < end; ++c) whole += b.chunk_area_ref[c];
+      if (then > 0.0) {
+        b.shape.region_area[r] = now * (whole / then);
+      } else {  // the sample had no area at the reference: every chunk
+        now = 0.0;
+        for (Index c = first; c < end; ++c) now += chunkArea(c);
+        b.shape.region_area[r] = now;
+      }
+    }
+  }
+  b.shape.max_edge = std::sqrt(max_edge2);
+}
+
 }  // namespace
 
-void refitBounds(Body& b, bool measure, bool swept, bool rest_fit, bool paths) {
+void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
   paths = paths && !swept;
+  const bool measure = how.kind != Measure::None;
+  // A full measure reads every triangle from a packed copy of the positions that the pass leaves;
+  // a sampled one reads its few chunks' corners in place.
   const ChunkLists& ch = b.chunks;
+  const bool full = how.kind == Measure::Full || (measure && b.chunk_area_ref.size() != ch.count());
   b.chunk_box.assign(ch.count(), emptyBox());
   b.region_box.assign(b.regionCount(), emptyBox());
   b.body_box = emptyBox();
@@ -766,12 +837,12 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit, bool paths) {
   // per vertex, held only during this call.
   std::vector<float> copy_f;
   std::vector<double> copy_d;
-  if (measure && is_float)
+  if (full && is_float)
     copy_f.resize(3 * ch.chunk_of.size());
-  else if (measure)
+  else if (full)
     copy_d.resize(3 * ch.chunk_of.size());
-  float* const cf = measure && is_float ? copy_f.data() : nullptr;
-  double* const cd = measure && !is_float ? copy_d.data() : nullptr;
+  float* const cf = full && is_float ? copy_f.data() : nullptr;
+  double* const cd = full && !is_float ? copy_d.data() : nullptr;
   rest_fit = rest_fit && !swept && b.selfCollides();
 #if defined(PSC_HAVE_AVX2_PATH)
   if (rest_fit && is_float && !paths && prev != nullptr && useAvx2Probes()) {
@@ -841,27 +912,10 @@ void refitBounds(Body& b, bool measure, bool swept, bool rest_fit, bool paths) {
     if (!b.previous.empty()) checkFinite(b.previous, b.label() + " (previous positions)");
   }
   if (measure) {
-    double max_edge2 = 0.0;
-#if defined(PSC_HAVE_AVX2_PATH)
-    const bool avx2 = is_float && useAvx2Probes();
-    thread_local std::vector<double> table;
-#endif
-    for (std::size_t c = 0; c < ch.count(); ++c) {
-      double& area = b.shape.region_area[ch.region_of[c]];
-#if defined(PSC_HAVE_AVX2_PATH)
-      if (avx2) {
-        measureChunkAvx2(ch, static_cast<Index>(c), cf, table, area, max_edge2);
-        continue;
-      }
-#endif
-      if (is_float)
-        measureChunk<float>(ch, static_cast<Index>(c), reinterpret_cast<const char*>(cf), 3 * sizeof(float), area,
-                            max_edge2);
-      else
-        measureChunk<double>(ch, static_cast<Index>(c), reinterpret_cast<const char*>(cd), 3 * sizeof(double), area,
-                             max_edge2);
-    }
-    b.shape.max_edge = std::sqrt(max_edge2);
+    // The measures' positions: the packed copy after a full pass, the records themselves otherwise.
+    const char* mbase = cf != nullptr ? reinterpret_cast<const char*>(cf) : cd != nullptr ? reinterpret_cast<const char*>(cd) : base;
+    const std::size_t mstride = cf != nullptr ? 3 * sizeof(float) : cd != nullptr ? 3 * sizeof(double) : stride;
+    measureRegions(b, how, mbase, mstride, is_float);
   }
   for (Index r = 0; r < b.regionCount(); ++r) {
     for (Index c = ch.region_begin[r]; c < ch.region_begin[r + 1]; ++c) grow(b.region_box[r], b.chunk_box[c]);

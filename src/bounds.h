@@ -20,14 +20,26 @@
 
 namespace psc::detail {
 
+/// What a refit measures besides the boxes (b.shape), for the repartition check.
+struct Measure {
+  enum Kind { None, Sampled, Full };
+  Kind kind = None;
+  /// Each region's area from about this many of its chunks (RepartitionSettings::area_sample_chunks;
+  /// 0 = every chunk).
+  std::size_t sample_chunks = 0;
+};
+
 /// Refits b's chunk, region and body boxes; throws psc::Error naming the first non-finite vertex.
-/// With `measure`, also fills b.shape (region areas and the longest edge) in the same pass.
+/// With a measure, also fills b.shape: each region's area and the longest edge. Measure::Full reads
+/// every triangle (and fills b.shape.chunk_area); Measure::Sampled, with b.chunk_area_ref from a
+/// full measure of the same chunks, reads every k-th chunk of a region and scales their area now by
+/// the region's over theirs in the reference (the exact sum where k is 1; max_edge then theirs).
 /// `swept` (MotionBound::Swept): the boxes hold the previous positions too and no motion term.
 /// With `rest_fit` (a self-colliding body, MotionBound::Radius), the same pass fills b.rest_fit,
 /// the rest-shape bound of the self-collision cull. `paths` (MotionBound::Radius with
 /// SensorSettings::meeting_pairs): the boxes hold the previous positions too, as with `swept`, and
 /// the motion term is kept.
-void refitBounds(Body& b, bool measure, bool swept, bool rest_fit = false, bool paths = false);
+void refitBounds(Body& b, Measure measure, bool swept, bool rest_fit = false, bool paths = false);
 
 /// SensorSettings::nearest_candidates: each vertex's nearest triangles of the last step, per
 /// ordered body pair. The next step's candidate stage starts each such vertex's search from its

@@ -37,7 +37,8 @@ void validate(const SensorSettings& s) {
     bad("self_rest_exclusion", s.self_rest_exclusion, "must be finite and at least 1");
   if (s.min_region_vertices < 1)
     bad("min_region_vertices", static_cast<double>(s.min_region_vertices), "must be at least 1");
-  if (s.chunk_vertices < 4) bad("chunk_vertices", static_cast<double>(s.chunk_vertices), "must be at least 4");
+  if (s.chunk_vertices != 0 && s.chunk_vertices < 4)
+    bad("chunk_vertices", static_cast<double>(s.chunk_vertices), "must be 0 (by the body's size) or at least 4");
   validate(s.partition);
   const DecompositionSettings& d = s.decomposition;
   if (!std::isfinite(d.concavity) || !(d.concavity > 0.0)) bad("decomposition.concavity", d.concavity, "must be positive");

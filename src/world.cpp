@@ -119,11 +119,15 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
   b.particle_vertex = b.partition.seed_vertex;
   b.mean_edge = edgeStats(topology, b.positions).mean;
   b.chunks = detail::buildChunks(topology, b.positions, b.partition.region_of, b.partition.regionCount(),
-                                 settings.chunk_vertices);
+                                 chunkVerticesFor(settings, b.vertices_in_triangles));
   b.rest_fit.reset();
   // The repartition check compares with what the same refit measures now (A* and the longest edge).
-  detail::refitBounds(b, true, settings.motion_bound == MotionBound::Swept, restFitOn(b), meetingPairs());
+  b.chunk_area_ref.clear();  // the new chunks' areas become the reference
+  detail::refitBounds(b, {detail::Measure::Full, settings.repartition.area_sample_chunks},
+                      settings.motion_bound == MotionBound::Swept, restFitOn(b), meetingPairs());
   b.max_edge = b.shape.max_edge;
+  b.chunk_area_ref = std::move(b.shape.chunk_area);
+  b.shape.chunk_area = {};
   const std::vector<double> areas =
       settings.repartition.estimator == AreaEstimator::TrueArea
           ? b.shape.region_area
@@ -171,8 +175,13 @@ void SensorWorld::Impl::refitAndCheck(Body& b, StepStats& stats) {
   const RepartitionSettings& rs = settings.repartition;
   const bool check = rs.enabled && b.deformable && ++b.steps_since_check >= rs.check_every;
   // The check's area and edge figures come out of the refit's pass over the vertices.
+  // The edge trigger (the thesis's mode only) needs every triangle's edges; the area trigger needs
+  // only the regions' sampled areas.
+  const bool edges = settings.flagging == Flagging::Sensors && rs.edge_stretch_trigger > 0.0;
+  const detail::Measure measure{!check ? detail::Measure::None : edges ? detail::Measure::Full : detail::Measure::Sampled,
+                                rs.area_sample_chunks};
   auto t = Clock::now();
-  detail::refitBounds(b, check, settings.motion_bound == MotionBound::Swept, restFitOn(b), meetingPairs());
+  detail::refitBounds(b, measure, settings.motion_bound == MotionBound::Swept, restFitOn(b), meetingPairs());
   stats.ms_refit += msSince(t);
   if (!check) return;
   t = Clock::now();
@@ -180,8 +189,7 @@ void SensorWorld::Impl::refitAndCheck(Body& b, StepStats& stats) {
   // The edge trigger refreshes μ, which decides only in the thesis's flag-only mode: the default
   // midphase's boxes and distances do not depend on it, and there a repartition for one stretched
   // edge changed nothing but cost (about 40 ms per 50,000-vertex body; docs/METHOD.md §7).
-  bool trigger = settings.flagging == Flagging::Sensors && rs.edge_stretch_trigger > 0.0 &&
-                 b.shape.max_edge > rs.edge_stretch_trigger * b.max_edge;
+  bool trigger = edges && b.shape.max_edge > rs.edge_stretch_trigger * b.max_edge;
   if (!trigger) {
     const std::vector<double> areas =
         rs.estimator == AreaEstimator::TrueArea
@@ -648,6 +656,7 @@ std::size_t SensorWorld::memoryBytes(BodyId id) const {
          b.partition.code_vectors.capacity() * sizeof(b.partition.code_vectors[0]) +
          b.particle_vertex.capacity() * sizeof(Index) + b.chunks.bytes() +
          (b.chunk_box.capacity() + b.region_box.capacity()) * sizeof(detail::MotionBox) +
+         b.chunk_area_ref.capacity() * sizeof(double) +
          b.rest.capacity() * sizeof(Vec3) + (b.rest_fit ? sizeof(detail::RestFit) + b.rest_fit->bytes() : 0) +
          impl_->nearest_seeds.bytes(id);
 }

@@ -54,6 +54,11 @@ struct RepartitionSettings {
   AreaEstimator estimator = AreaEstimator::TrueArea;
   int check_every = 10;                ///< steps between checks of a body (≥ 1)
   double area_trigger = 1.5;           ///< repartition when a region's area > area_trigger × A* (≥ 1; thesis: 1)
+  /// [beyond] A check's TrueArea reads every k-th of a region's chunks, k = its chunk count /
+  /// area_sample_chunks (at least 1): the region's area is their area now times the region's over
+  /// theirs at partitioning (exact for an even stretch). Exact for a region of fewer than
+  /// 2 × area_sample_chunks chunks; 0 = every chunk, always exact. A* is always exact.
+  std::size_t area_sample_chunks = 16;
   double edge_stretch_trigger = 1.5;   ///< [beyond] ... or the longest edge > trigger × its length at
                                        ///< partitioning (≥ 1; 0 = off); also refreshes μ. Only in
                                        ///< Flagging::Sensors, the one mode where μ decides
@@ -118,8 +123,9 @@ struct SensorSettings {
   /// parts, not vertices: 8 HACD parts × 12 give a 500-vertex torus ~100 regions of 5 vertices.
   /// 1 = the thesis's budget unchanged.
   std::size_t min_region_vertices = 64;
-  /// [beyond] Vertices per chunk of the bounds layer (≥ 4): smaller = tighter boxes, more boxes.
-  std::size_t chunk_vertices = 32;
+  /// [beyond] Vertices per chunk of the bounds layer: smaller = tighter boxes, more boxes. 0 (the
+  /// default) = by the body's size, chunkVerticesFor(); otherwise at least 4.
+  std::size_t chunk_vertices = 0;
   /// Build (vertex, triangle) candidate pairs in step(); off = flagged pairs only.
   bool build_candidates = true;
   /// [beyond] Of each vertex's candidates against one body (its own under self-collision), keep
@@ -153,6 +159,15 @@ struct SensorSettings {
   DecompositionSettings decomposition;
   RepartitionSettings repartition;
 };
+
+/// The chunk size a body of `vertices` vertices (in triangles) gets: SensorSettings::chunk_vertices,
+/// or where that is 0, 32 below 4,096 vertices and 64 from there. A body whose nodes no longer stay
+/// in the cache pays for every vertex a chunk boundary makes it add to a second box and for every
+/// chunk pair it gathers; bigger chunks there cut both (docs/DECISIONS.md, "Stop 41").
+inline std::size_t chunkVerticesFor(const SensorSettings& s, std::size_t vertices) {
+  if (s.chunk_vertices != 0) return s.chunk_vertices;
+  return vertices < 4096 ? 32 : 64;
+}
 
 /// Throws psc::Error(InvalidSettings) naming the first setting out of range.
 void validate(const SensorSettings& settings);

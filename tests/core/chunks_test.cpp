@@ -136,7 +136,7 @@ TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
         }
         b.chunks = buildChunks(topo, b.positions, region_of, 2, 32);
         b.particle_vertex = {0, 1};
-        refitBounds(b, false, swept);
+        refitBounds(b, {}, swept);
         const ChunkLists& ch = b.chunks;
         ASSERT_EQ(b.chunk_box.size(), ch.count());
         // The positions as the refit reads them (single precision values are exact in double).
@@ -214,7 +214,7 @@ TEST(ForeignChunks, RestFitPassGivesTheSameBitsWithAndWithoutAvx2) {
       for (const std::vector<std::array<float, 8>>& f : records) {
         b.positions = PositionView(f[0].data(), n, sizeof f[0]);
         b.previous = PositionView(f[0].data() + 4, n, sizeof f[0]);
-        refitBounds(b, false, false, true);
+        refitBounds(b, {}, false, true);
       }
     }
     allowAvx2Probes(true);
@@ -245,8 +245,8 @@ TEST(ForeignChunks, RestFitPassGivesTheSameBitsWithAndWithoutAvx2) {
   }
 }
 
-// The repartition check's measures from the refit's pass (measure = true): each region's area is
-// the sum of its chunks' triangle areas and max_edge the longest triangle edge, against Eigen's
+// The repartition check's measures from the refit's pass (a full measure, every chunk sampled):
+// each region's area is the sum of its chunks' triangle areas and max_edge the longest triangle edge, against Eigen's
 // own cross products and norms on the positions as read (a relative 1e-12 for the sums, whose
 // order differs); single-precision records go through the fast pass and, with AVX2, through four
 // triangles at a time, which must give the scalar path's very bits.
@@ -268,7 +268,7 @@ TEST(ForeignChunks, RefitMeasuresRegionAreasAndTheLongestEdge) {
         b.positions = single ? PositionView(f[0].data(), n, sizeof f[0]) : PositionView::of(x);
         b.chunks = buildChunks(topo, b.positions, region_of, 3, 32);
         b.particle_vertex = {0, 1, 2};
-        refitBounds(b, true, false);
+        refitBounds(b, {Measure::Full, 0}, false);
         allowAvx2Probes(true);
         const ChunkLists& ch = b.chunks;
         std::vector<double> brute(3, 0.0);
@@ -293,6 +293,68 @@ TEST(ForeignChunks, RefitMeasuresRegionAreasAndTheLongestEdge) {
       EXPECT_EQ(edges[0], edges[1]) << resolution;
     }
   }
+}
+
+// The check's sampled areas (RepartitionSettings::area_sample_chunks): each region's area from
+// every k-th of its chunks, their area now times the region's over theirs in the reference (a full
+// measure at partitioning). The very sum, to the bit, where k is 1 or the reference is missing;
+// the exact area for the reference's own positions; with AVX2 and without the same bits; and on a
+// body stretched unevenly (by 1.5 along x, so each chunk's area grows by its own factor) the
+// trigger's ratio, area now over A*, within a few percent of the true one.
+TEST(ForeignChunks, SampledRegionAreasEstimateTheTrueAreas) {
+  const TriMesh m = makeTorus(1.0, 0.3, 20000);
+  const std::size_t n = m.vertices.size();
+  std::vector<Vec3> x, q;
+  const std::vector<std::array<float, 8>> f = jitteredRecords(m, 7, 0.03, x, q);
+  std::vector<std::array<float, 8>> g = f;
+  for (auto& r : g) r[0] *= 1.5f;
+  const MeshTopology topo(m.triangles, n);
+  std::vector<Index> region_of(n);
+  for (std::size_t v = 0; v < n; ++v) region_of[v] = m.vertices[v].x() < 0.0 ? 0 : m.vertices[v].y() < 0.0 ? 1 : 2;
+  Body b;
+  b.positions = PositionView(f[0].data(), n, sizeof f[0]);
+  b.chunks = buildChunks(topo, b.positions, region_of, 3, 32);
+  b.particle_vertex = {0, 1, 2};
+  const ChunkLists& ch = b.chunks;
+  Index most = 0, fewest = static_cast<Index>(ch.count());
+  for (Index r = 0; r < 3; ++r) {
+    most = std::max(most, ch.region_begin[r + 1] - ch.region_begin[r]);
+    fewest = std::min(fewest, ch.region_begin[r + 1] - ch.region_begin[r]);
+  }
+  ASSERT_GE(fewest, 100u);  // so that a sample of 8 leaves out most chunks
+  const auto measure = [&](const std::vector<std::array<float, 8>>& records, Measure how, bool avx2) {
+    allowAvx2Probes(avx2);
+    b.positions = PositionView(records[0].data(), n, sizeof records[0]);
+    refitBounds(b, how, false);
+    allowAvx2Probes(true);
+    return b.shape;
+  };
+  std::vector<double> estimates[2];
+  for (const bool avx2 : {true, false}) {
+    b.chunk_area_ref.clear();
+    const ShapeFigures exact = measure(f, {Measure::Full, 8}, avx2);
+    const ShapeFigures stretched_exact = measure(g, {Measure::Full, 8}, avx2);
+    ASSERT_EQ(exact.chunk_area.size(), ch.count());
+    // No reference yet: a sampled measure reads every chunk.
+    EXPECT_EQ(measure(f, {Measure::Sampled, 8}, avx2).region_area, exact.region_area) << avx2;
+    b.chunk_area_ref = exact.chunk_area;
+    // k = 1 in every region: the sums themselves.
+    EXPECT_EQ(measure(g, {Measure::Sampled, most}, avx2).region_area, stretched_exact.region_area) << avx2;
+    const ShapeFigures same = measure(f, {Measure::Sampled, 8}, avx2);
+    const ShapeFigures stretched = measure(g, {Measure::Sampled, 8}, avx2);
+    EXPECT_LE(stretched.max_edge, stretched_exact.max_edge) << avx2;
+    EXPECT_TRUE(stretched.chunk_area.empty());
+    for (int r = 0; r < 3; ++r) {
+      EXPECT_NEAR(same.region_area[r], exact.region_area[r], 1e-12 * exact.region_area[r]) << avx2 << " region " << r;
+      const double ratio = stretched.region_area[r] / exact.region_area[r];
+      const double truth = stretched_exact.region_area[r] / exact.region_area[r];
+      EXPECT_GT(truth, 1.15) << r;
+      EXPECT_NE(stretched.region_area[r], stretched_exact.region_area[r]) << avx2 << " region " << r;
+      EXPECT_NEAR(ratio, truth, 0.02 * truth) << avx2 << " region " << r;
+    }
+    estimates[avx2 ? 1 : 0] = stretched.region_area;
+  }
+  EXPECT_EQ(estimates[0], estimates[1]);
 }
 
 }  // namespace

@@ -456,7 +456,7 @@ TEST(BadSettings, NegativeOrZeroSizesAreNamed) {
   named("ahead_steps", [](SensorSettings& s) { s.ahead_steps = 0.0; });
   named("ahead_steps", [](SensorSettings& s) { s.ahead_steps = std::numeric_limits<double>::quiet_NaN(); });
   named("motion_bound", [](SensorSettings& s) { s.motion_bound = static_cast<MotionBound>(7); });
-  named("chunk_vertices", [](SensorSettings& s) { s.chunk_vertices = 0; });
+  named("chunk_vertices", [](SensorSettings& s) { s.chunk_vertices = 3; });
   named("check_every", [](SensorSettings& s) { s.repartition.check_every = 0; });
   named("area_trigger", [](SensorSettings& s) { s.repartition.area_trigger = 0.0; });
   named("edge_stretch_trigger", [](SensorSettings& s) { s.repartition.edge_stretch_trigger = -1.0; });
