@@ -812,8 +812,6 @@ void measureRegions(Body& b, Measure how, const char* base, std::size_t stride, 
 void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
   paths = paths && !swept;
   const bool measure = how.kind != Measure::None;
-  // A full measure reads every triangle from a packed copy of the positions that the pass leaves;
-  // a sampled one reads its few chunks' corners in place.
   const ChunkLists& ch = b.chunks;
   const bool full = how.kind == Measure::Full || (measure && b.chunk_area_ref.size() != ch.count());
   b.chunk_box.assign(ch.count(), emptyBox());
@@ -831,10 +829,10 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
   const std::size_t prev_stride = b.previous.strideBytes();
   const bool is_float = b.positions.scalar() == PositionView::Scalar::Float32;
   double sum = 0.0;
-  // The check's measures read each triangle's corners. Read from the positions' own records
-  // (Bullet's nodes, 256 bytes apart) they miss the cache about three times per triangle on a
-  // large body, so the pass leaves a packed copy of the body's positions for them: 12 or 24 bytes
-  // per vertex, held only during this call.
+  // A full measure reads every triangle's corners. Read from the positions' own records (Bullet's
+  // nodes, 256 bytes apart) they miss the cache about three times per triangle on a large body, so
+  // the pass leaves a packed copy of the body's positions for it: 12 or 24 bytes per vertex, held
+  // only during this call. A sampled measure reads its few chunks in place.
   std::vector<float> copy_f;
   std::vector<double> copy_d;
   if (full && is_float)
