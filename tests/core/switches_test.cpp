@@ -425,5 +425,36 @@ TEST(Memory, WideIndicesKeepTheMeshAndEveryContact) {
   EXPECT_EQ(w.topology(0).triangles(), a.triangles);
 }
 
+// chunk_vertices = 0 (the default) gives a body of 4,096 vertices or more 64-vertex chunks and a
+// smaller one 32-vertex chunks; an explicit size wins. The chunks change what the midphase costs,
+// never what it finds: two 5,000-vertex spheres in contact give the same candidates with 64-vertex
+// chunks as with 32, in fewer bytes.
+TEST(ChunkSize, LargeBodiesGetBiggerChunksAndTheSameCandidates) {
+  SensorSettings automatic;
+  EXPECT_EQ(automatic.chunk_vertices, 0u);
+  EXPECT_EQ(chunkVerticesFor(automatic, 4095), 32u);
+  EXPECT_EQ(chunkVerticesFor(automatic, 4096), 64u);
+  SensorSettings fixed;
+  fixed.chunk_vertices = 32;
+  EXPECT_EQ(chunkVerticesFor(fixed, 50000), 32u);
+  constexpr double kMargin = 0.02;
+  TriMesh a = makeSphere(1.0, 5000), b = makeSphere(1.0, 5000);
+  b.translate(Vec3(1.99, 0.07, 0.03));
+  ASSERT_GE(a.vertices.size(), 4096u);
+  std::set<std::tuple<BodyId, Index, BodyId, Index>> found[2];
+  std::size_t bytes[2] = {0, 0};
+  for (int k = 0; k < 2; ++k) {
+    SensorWorld w(k == 0 ? automatic : fixed);
+    addAll(w, {&a, &b}, kMargin);
+    const StepResult& r = w.step();
+    for (const CandidatePair& c : r.candidates) found[k].insert({c.vertex_body, c.vertex, c.triangle_body, c.triangle});
+    EXPECT_EQ(found[k].size(), r.candidates.size());
+    bytes[k] = w.memoryBytes(0);
+  }
+  EXPECT_GT(found[0].size(), 100u);
+  EXPECT_EQ(found[0], found[1]);
+  EXPECT_LT(bytes[0], bytes[1]);
+}
+
 }  // namespace
 }  // namespace psc
