@@ -174,9 +174,8 @@ void SensorWorld::Impl::preparePartitions(StepStats& stats) {
 void SensorWorld::Impl::refitAndCheck(Body& b, StepStats& stats) {
   const RepartitionSettings& rs = settings.repartition;
   const bool check = rs.enabled && b.deformable && ++b.steps_since_check >= rs.check_every;
-  // The check's area and edge figures come out of the refit's pass over the vertices.
-  // The edge trigger (the thesis's mode only) needs every triangle's edges; the area trigger needs
-  // only the regions' sampled areas.
+  // The check's figures come with the refit: the regions' areas from a sample of their chunks,
+  // measured after the pass; the edge trigger (the thesis's mode only) needs every triangle's edges.
   const bool edges = settings.flagging == Flagging::Sensors && rs.edge_stretch_trigger > 0.0;
   const detail::Measure measure{!check ? detail::Measure::None : edges ? detail::Measure::Full : detail::Measure::Sampled,
                                 rs.area_sample_chunks};
