@@ -742,16 +742,16 @@ void finishRestFit(Body& b) {
 
 /// b.shape from the positions at `base` (`stride` bytes apart).
 ///
-/// Full: every chunk's area (b.shape.chunk_area), each region's the sum of its chunks' in their
-/// order, and the longest edge of every triangle. Sampled (a check after the body's partitioning
+/// `full`: every chunk's area (b.shape.chunk_area), each region's the sum of its chunks' in their
+/// order, and the longest edge of every triangle. Otherwise (a check after the body's partitioning
 /// kept a full measure's chunk areas in b.chunk_area_ref): only every k-th chunk of a region is
 /// read, k = its chunk count / `sample_chunks` (at least 1), and the region's area is their sum
 /// now times the region's area over theirs at that measure, a ratio estimator: exact for a region
 /// that stretches evenly, and the very sum, to the bit, where k is 1. max_edge is then the sampled
-/// chunks'. Without a reference of the right size every chunk is read.
-void measureRegions(Body& b, Measure how, const char* base, std::size_t stride, bool is_float) {
+/// chunks'. `full` also where a sampled measure has no reference of the right size (refitBounds).
+void measureRegions(Body& b, bool full, std::size_t sample_chunks, const char* base, std::size_t stride,
+                    bool is_float) {
   const ChunkLists& ch = b.chunks;
-  const bool full = how.kind == Measure::Full || b.chunk_area_ref.size() != ch.count();
   double max_edge2 = 0.0;
 #if defined(PSC_HAVE_AVX2_PATH)
   const bool avx2 = is_float && useAvx2Probes();
@@ -784,7 +784,7 @@ void measureRegions(Body& b, Measure how, const char* base, std::size_t stride, 
     b.shape.chunk_area.clear();
     for (Index r = 0; r < b.regionCount(); ++r) {
       const Index first = ch.region_begin[r], end = ch.region_begin[r + 1];
-      const std::size_t k = how.sample_chunks == 0 ? 1 : std::max<std::size_t>(1, (end - first) / how.sample_chunks);
+      const std::size_t k = sample_chunks == 0 ? 1 : std::max<std::size_t>(1, (end - first) / sample_chunks);
       double now = 0.0, then = 0.0, whole = 0.0;
       for (Index c = first; c < end; c += static_cast<Index>(k)) {
         now += chunkArea(c);
@@ -913,7 +913,7 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
     // The measures' positions: the packed copy after a full pass, the records themselves otherwise.
     const char* mbase = cf != nullptr ? reinterpret_cast<const char*>(cf) : cd != nullptr ? reinterpret_cast<const char*>(cd) : base;
     const std::size_t mstride = cf != nullptr ? 3 * sizeof(float) : cd != nullptr ? 3 * sizeof(double) : stride;
-    measureRegions(b, how, mbase, mstride, is_float);
+    measureRegions(b, full, how.sample_chunks, mbase, mstride, is_float);
   }
   for (Index r = 0; r < b.regionCount(); ++r) {
     for (Index c = ch.region_begin[r]; c < ch.region_begin[r + 1]; ++c) grow(b.region_box[r], b.chunk_box[c]);
