@@ -8,6 +8,7 @@
 #include "psc/world.h"
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <cstring>
 #include <memory>
@@ -198,6 +199,12 @@ struct MotionBox {
   double motion = 0.0;
 };
 
+/// [beyond] A chunk's box of its own vertices alone, without the corners its triangles borrow from
+/// its neighbours (MotionBox holds both), in the positions' single precision.
+struct OwnBox {
+  std::array<float, 3> lo, hi;
+};
+
 /// The order of StepResult::flagged: (body_a, region_a, body_b, region_b).
 inline bool flaggedLess(const FlaggedPair& a, const FlaggedPair& b) {
   if (a.body_a != b.body_a) return a.body_a < b.body_a;
@@ -293,6 +300,10 @@ struct Body {
   // Bounds layer (Flagging::SensorsAndBounds), refit every step.
   ChunkLists chunks;
   std::vector<MotionBox> chunk_box;
+  /// Each chunk's own vertices' box, when the refit's packed single-precision pass made it (empty
+  /// otherwise): where the candidate stage asks whether a chunk's vertices can reach another body's
+  /// chunk, it then needs no vertex (Collector::verticesReach).
+  std::vector<OwnBox> chunk_own;
   std::vector<MotionBox> region_box;
   MotionBox body_box;
   ShapeFigures shape;  ///< filled by refitBounds with a measure

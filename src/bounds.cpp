@@ -274,7 +274,7 @@ template <typename Slot, bool kPrev, bool kCopy>
 [[gnu::noinline]] __m128 streamBoxesFloatLoop(const Index* __restrict chunk_of, const std::uint8_t* __restrict slots,
                                               std::size_t n, const char* base, std::size_t stride, const char* prev,
                                               std::size_t prev_stride, bool prev_apart, PackedBox* __restrict box,
-                                              float* __restrict copy, Slot none) {
+                                              PackedBox* __restrict borrowed, float* __restrict copy, Slot none) {
   __m128 nan = _mm_setzero_ps();
   for (std::size_t v = 0; v < n; ++v) {
     __builtin_prefetch(base + (v + 24) * stride);
@@ -294,10 +294,47 @@ template <typename Slot, bool kPrev, bool kCopy>
     growPacked(box[c], xv, xm);
     Slot f[2];
     std::memcpy(f, slots + 2 * sizeof(Slot) * v, sizeof f);
-    growPacked(box[f[0]], xv, xv);  // lane 3: 0, the motion stays the own vertices'
-    if (f[1] != none) growPacked(box[f[1]], xv, xv);
+    growPacked(borrowed[f[0]], xv, xv);  // lane 3: 0, the motion stays the own vertices'
+    if (f[1] != none) growPacked(borrowed[f[1]], xv, xv);
   }
   return nan;
+}
+
+/// The end of streamBoxesFloat: each chunk's box as the refit leaves it (its own vertices' packed
+/// box `own` and the corners its triangles borrow, `borrowed`, in double, the motion the square
+/// root of the packed squared motion raised by 1e-6 relative, so never below the double value)
+/// into `boxes`, and the own box alone into `own_boxes`. Returns whether every coordinate is
+/// within ±kMaxCoordinate and every motion finite (`nan`: the pass met a NaN).
+bool finishPackedBoxes(const PackedBox* own, const PackedBox* borrowed, std::size_t chunks, bool nan,
+                       std::vector<MotionBox>& boxes, std::vector<OwnBox>& own_boxes) {
+  boxes.resize(chunks);
+  own_boxes.resize(chunks);
+  const __m128 sign = _mm_set1_ps(-0.0f);
+  const __m128 xyz = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+  __m128 biggest = _mm_setzero_ps();
+  bool motions_finite = true;
+  for (std::size_t c = 0; c < chunks; ++c) {
+    alignas(16) float l[4], h[4];
+    _mm_store_ps(l, own[c][0]);
+    _mm_store_ps(h, own[c][1]);
+    own_boxes[c] = OwnBox{{l[0], l[1], l[2]}, {h[0], h[1], h[2]}};
+    // The own box's fourth lanes: 0 and the squared motion; the borrowed box's: +infinity and 0.
+    const __m128 lo = _mm_min_ps(borrowed[c][0], own[c][0]), hi = _mm_max_ps(borrowed[c][1], own[c][1]);
+    biggest = _mm_max_ps(biggest, _mm_andnot_ps(sign, _mm_and_ps(lo, xyz)));
+    biggest = _mm_max_ps(biggest, _mm_andnot_ps(sign, _mm_and_ps(hi, xyz)));
+    _mm_store_ps(l, lo);
+    _mm_store_ps(h, hi);
+    MotionBox& b = boxes[c];
+    b.lo = Vec3(l[0], l[1], l[2]);
+    b.hi = Vec3(h[0], h[1], h[2]);
+    const double m2 = static_cast<double>(h[3]) * (1.0 + 1e-6);
+    motions_finite = motions_finite && m2 <= std::numeric_limits<double>::max();
+    b.motion = std::sqrt(m2);
+  }
+  alignas(16) float g[4];
+  _mm_store_ps(g, biggest);
+  const double largest = std::max({static_cast<double>(g[0]), static_cast<double>(g[1]), static_cast<double>(g[2])});
+  return !nan && motions_finite && largest <= kMaxCoordinate;
 }
 
 /// streamBoxes for the common step: single-precision positions, the radius bound and no rest fit
@@ -314,22 +351,29 @@ template <typename Slot, bool kPrev, bool kCopy>
 /// of it measured no difference, docs/DECISIONS.md "Stop 33")
 /// (psc_demo --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors
 /// --truth none, refit_ms_mean, two or three alternating runs each).
+/// The corners a chunk borrows grow a box of their own, merged with the own vertices' at the end
+/// (the same boxes; the own one is kept too: Body::chunk_own), and that end also takes the motions'
+/// square roots and checks the range, in one pass over the chunks. Returns whether every box and
+/// motion is finite and within ±kMaxCoordinate.
 template <typename Slot>
-void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev,
-                      std::size_t prev_stride, std::vector<MotionBox>& boxes, double& sum, float* copy) {
+bool streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev,
+                      std::size_t prev_stride, std::vector<MotionBox>& boxes, std::vector<OwnBox>& own_boxes,
+                      float* copy) {
   const std::size_t n = ch.chunk_of.size(), chunks = ch.count();
   const std::uint8_t* slots = ch.foreign.slotData();
-  thread_local std::vector<PackedBox> box;
-  box.assign(chunks + 1, emptyPackedBox());
+  thread_local std::vector<PackedBox> own, borrowed;
+  own.assign(chunks, emptyPackedBox());
+  borrowed.assign(chunks + 1, emptyPackedBox());
   const bool prev_apart = prefetchApart(base, stride, prev, prev_stride);
   const Index* chunk_of = ch.chunk_of.data();
-  PackedBox* b = box.data();
+  PackedBox* o = own.data();
+  PackedBox* b = borrowed.data();
   const auto none = static_cast<Slot>(ch.foreign.none());
   // The loop for this call's two compile-time choices (without previous positions prev is null and
   // prev_apart false; without a copy, copy is null).
   const auto loop = [&](auto with_prev, auto with_copy) {
     return streamBoxesFloatLoop<Slot, decltype(with_prev)::value, decltype(with_copy)::value>(
-        chunk_of, slots, n, base, stride, prev, prev_stride, prev_apart, b, copy, none);
+        chunk_of, slots, n, base, stride, prev, prev_stride, prev_apart, o, b, copy, none);
   };
   using Yes = std::true_type;
   using No = std::false_type;
@@ -340,10 +384,7 @@ void streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
     const __m128 xv = loadPoint(reinterpret_cast<const float*>(base + std::size_t{v} * stride));
     growPacked(b[f], xv, xv);
   }
-  // A NaN coordinate, or an infinite one (in a box or, through the motion, in the previous
-  // positions), makes the sum non-finite: the caller then names it.
-  if (_mm_movemask_ps(nan) != 0) sum += std::numeric_limits<double>::quiet_NaN();
-  unpackBoxes(b, chunks, boxes, sum);
+  return finishPackedBoxes(o, b, chunks, _mm_movemask_ps(nan) != 0, boxes, own_boxes);
 }
 #endif
 
@@ -814,7 +855,6 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
   const bool measure = how.kind != Measure::None;
   const ChunkLists& ch = b.chunks;
   const bool full = how.kind == Measure::Full || (measure && b.chunk_area_ref.size() != ch.count());
-  b.chunk_box.assign(ch.count(), emptyBox());
   b.region_box.assign(b.regionCount(), emptyBox());
   b.body_box = emptyBox();
   if (measure) {
@@ -842,6 +882,18 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
   float* const cf = full && is_float ? copy_f.data() : nullptr;
   double* const cd = full && !is_float ? copy_d.data() : nullptr;
   rest_fit = rest_fit && !swept && b.selfCollides();
+  // The packed pass (streamBoxesFloat) leaves every box final, motions and range check included;
+  // the other passes grow boxes from empty and leave that to the loop after them.
+#if defined(__SSE2__)
+  const bool packed = !rest_fit && is_float && !swept && !paths;
+#else
+  const bool packed = false;
+#endif
+  if (!packed) {
+    b.chunk_box.assign(ch.count(), emptyBox());
+    b.chunk_own.clear();
+  }
+  bool packed_finite = true;
 #if defined(PSC_HAVE_AVX2_PATH)
   if (rest_fit && is_float && !paths && prev != nullptr && useAvx2Probes()) {
     startRestFit(b);
@@ -866,13 +918,13 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
     if (b.rest_fit) b.rest_fit->filled = false;
     NoRestFit none;
 #if defined(__SSE2__)
-    if (is_float && !swept && !paths) {
+    if (packed) {
       if (ch.foreign.slotWidth() == 1)
-        streamBoxesFloat<std::uint8_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum, cf);
+        packed_finite = streamBoxesFloat<std::uint8_t>(ch, base, stride, prev, prev_stride, b.chunk_box, b.chunk_own, cf);
       else if (ch.foreign.slotWidth() == 2)
-        streamBoxesFloat<std::uint16_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum, cf);
+        packed_finite = streamBoxesFloat<std::uint16_t>(ch, base, stride, prev, prev_stride, b.chunk_box, b.chunk_own, cf);
       else
-        streamBoxesFloat<std::uint32_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum, cf);
+        packed_finite = streamBoxesFloat<std::uint32_t>(ch, base, stride, prev, prev_stride, b.chunk_box, b.chunk_own, cf);
     } else
 #endif
     if (is_float)
@@ -880,11 +932,13 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
     else
       streamBoxes<double>(ch, base, stride, prev, prev_stride, swept, paths, b.chunk_box, sum, none, cd);
   }
-  bool finite = std::isfinite(sum);
-  for (MotionBox& box : b.chunk_box) {
-    box.motion = std::sqrt(box.motion);
-    // Finite but beyond kMaxCoordinate (a blown-up simulation) is rejected like NaN.
-    finite = finite && box.lo.cwiseAbs().maxCoeff() <= kMaxCoordinate && box.hi.cwiseAbs().maxCoeff() <= kMaxCoordinate;
+  bool finite = packed_finite && std::isfinite(sum);
+  if (!packed) {
+    for (MotionBox& box : b.chunk_box) {
+      box.motion = std::sqrt(box.motion);
+      // Finite but beyond kMaxCoordinate (a blown-up simulation) is rejected like NaN.
+      finite = finite && box.lo.cwiseAbs().maxCoeff() <= kMaxCoordinate && box.hi.cwiseAbs().maxCoeff() <= kMaxCoordinate;
+    }
   }
   if (!same_type && (swept || paths)) {
     for (std::size_t v = 0; v < ch.chunk_of.size(); ++v) {
@@ -2425,11 +2479,22 @@ class Collector {
   /// `balls`: V's table (ballsOf).
   bool verticesReach(const Body& V, BallBoxes& balls, Index cv, const Body& T, Index ct, double margin_sum) {
     if (params_.swept) return true;
+    // Meeting pairs: a vertex's probes reach at least its own path (gatherVertices).
+    const double factor = params_.meeting ? std::max(params_.motion_factor, 1.0) : params_.motion_factor;
+    if (!balls.made[cv] && !V.chunk_own.empty()) {
+      // The refit's box of the chunk's own vertices, grown by factor × the chunk's largest own
+      // motion (chunk_box's, never below any vertex's |Δx|), holds every ball without reading a
+      // vertex (the loop below reads each, from Bullet's nodes a cache miss apiece on a large body).
+      // Rounding is monotonic, so it also holds the loop's rounded balls.
+      const OwnBox& own = V.chunk_own[cv];
+      const double m = factor * V.chunk_box[cv].motion;
+      balls.lo[cv] = Vec3(double(own.lo[0]) - m, double(own.lo[1]) - m, double(own.lo[2]) - m);
+      balls.hi[cv] = Vec3(double(own.hi[0]) + m, double(own.hi[1]) + m, double(own.hi[2]) + m);
+      balls.made[cv] = 1;
+    }
     if (!balls.made[cv]) {
       Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
       const bool moved = !V.previous.empty();
-      // Meeting pairs: a vertex's probes reach at least its own path (gatherVertices).
-      const double factor = params_.meeting ? std::max(params_.motion_factor, 1.0) : params_.motion_factor;
       for (const Index v : V.chunks.vertices(cv)) {
         const Vec3 x = V.positions[v];
         const double m = moved ? factor * (x - V.previous[v]).norm() : 0.0;
@@ -2587,10 +2652,13 @@ void cullAndCollect(const std::vector<Body*>& bodies, const BodyPairs& pairs, co
   for (const Group& g : groups) total += g.keys.size();
   if (total > candidates.capacity()) {
     // An empty list's old block is freed before the new one is taken (a reserve holds both at
-    // once); an eighth more room, so that counts growing from step to step do not reallocate
-    // every step.
+    // once). Room for an eighth more and for twice the growth since the last step, so that a list
+    // growing from step to step is not taken anew every step (each new block is a heap growth and
+    // page faults on its first writes: ~0.1–0.3 ms a step at 72k candidates, docs/DECISIONS.md
+    // "Stop 42"), while a list that has stopped growing keeps an eighth.
+    const std::size_t growth = total > params.last_candidates ? total - params.last_candidates : 0;
     if (candidates.empty()) candidates = std::vector<CandidatePair>();
-    candidates.reserve(total + total / 8);
+    candidates.reserve(total + total / 8 + 2 * growth);
   }
   // Each group's keys are freed once copied: held to the end, they were 22 MB of the peak of a
   // settled fine pile (8 tori × 8,000 vertices, 1.9 million candidates a step) beside the list.

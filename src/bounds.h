@@ -85,6 +85,9 @@ struct CullParams {
   bool nearest = false;              ///< SensorSettings::nearest_candidates (not with `swept`)
   /// With `nearest`: the last step's nearest triangles (read), and this step's (written).
   NearestSeeds* seeds = nullptr;
+  /// The candidate list's length at the last step: when the list must grow, its growth since then
+  /// sets the room taken ahead (cullAndCollect).
+  std::size_t last_candidates = 0;
 };
 
 /// The pairs (i < j) of `bodies` whose grown body boxes overlap, by sort-and-sweep, sorted.

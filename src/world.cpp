@@ -59,6 +59,7 @@ struct SensorWorld::Impl {
   std::vector<std::pair<BodyId, BodyId>> ahead_pairs;
   /// SensorSettings::nearest_candidates: each vertex's nearest triangles of the last step.
   detail::NearestSeeds nearest_seeds;
+  std::size_t last_candidates = 0;  ///< the candidate list's length at the last step (CullParams)
 
   Body& get(BodyId id) {
     auto it = bodies.find(id);
@@ -606,7 +607,9 @@ const StepResult& SensorWorld::step() {
       st.ms_candidates = msSince(t);
     }
   } else {
+    params.last_candidates = w.last_candidates;
     detail::cullAndCollect(ordered, body_pairs, params, res.flagged, res.candidates, st);
+    w.last_candidates = res.candidates.size();
     std::sort(res.flagged.begin(), res.flagged.end(), detail::flaggedLess);
     st.ms_flagging = msSince(t) - st.ms_candidates;
     st.candidate_pairs = res.candidates.size();
@@ -655,7 +658,7 @@ std::size_t SensorWorld::memoryBytes(BodyId id) const {
          b.partition.code_vectors.capacity() * sizeof(b.partition.code_vectors[0]) +
          b.particle_vertex.capacity() * sizeof(Index) + b.chunks.bytes() +
          (b.chunk_box.capacity() + b.region_box.capacity()) * sizeof(detail::MotionBox) +
-         b.chunk_area_ref.capacity() * sizeof(double) +
+         b.chunk_own.capacity() * sizeof(detail::OwnBox) + b.chunk_area_ref.capacity() * sizeof(double) +
          b.rest.capacity() * sizeof(Vec3) + (b.rest_fit ? sizeof(detail::RestFit) + b.rest_fit->bytes() : 0) +
          impl_->nearest_seeds.bytes(id);
 }

@@ -88,8 +88,14 @@ psc::SensorSettings coreSettings(const Settings& settings) {
 /// the old one is still held: on a pile whose contacts grow from step to step (8 tori x 8,000
 /// vertices: 1.5k candidates a step at step 50, 1.8M at step 190) that held up to twice the
 /// contacts' bytes between steps and three times during a growth. An empty array short of room is
-/// freed first, then sized to this step's need and an eighth more, so it is not regrown every step.
-void reserveContacts(const std::vector<psc::CandidatePair>& candidates, const detail::BodyRegistry& registry) {
+/// freed first, then sized to this step's need, an eighth more and twice its growth since the last
+/// step (`last_need`: each body's need then, by id; replaced by this step's): a growing array is not
+/// taken anew every step (each new block costs heap growth and page faults on its first writes:
+/// 8 tori x 50,000 vertices took 0.1–0.5 ms a step here, and single steps 4–12 ms, with an eighth
+/// alone; docs/DECISIONS.md "Stop 42"), one that stopped growing keeps an eighth.
+void reserveContacts(const std::vector<psc::CandidatePair>& candidates, const detail::BodyRegistry& registry,
+                     std::vector<std::pair<psc::BodyId, std::size_t>>& last_need) {
+  std::vector<std::pair<psc::BodyId, std::size_t>> need_now;
   for (auto run = candidates.begin(); run != candidates.end();) {
     const psc::BodyId id = run->vertex_body;
     const auto end = std::upper_bound(run, candidates.end(), id, [](psc::BodyId b, const psc::CandidatePair& c) {
@@ -99,13 +105,19 @@ void reserveContacts(const std::vector<psc::CandidatePair>& candidates, const de
     const auto need = static_cast<std::size_t>(end - run);
     run = end;
     if (body == nullptr) continue;
+    need_now.emplace_back(id, need);
     btAlignedObjectArray<btSoftBody::SContact>& list = body->m_scontacts;
     const std::size_t have = static_cast<std::size_t>(list.size());
     if (have + need <= static_cast<std::size_t>(list.capacity())) continue;
-    const std::size_t want = std::min<std::size_t>(have + need + need / 8, std::numeric_limits<int>::max());
+    const auto last = std::lower_bound(last_need.begin(), last_need.end(), std::make_pair(id, std::size_t{0}));
+    const std::size_t before = last != last_need.end() && last->first == id ? last->second : 0;
+    const std::size_t growth = need > before ? need - before : 0;
+    const std::size_t want =
+        std::min<std::size_t>(have + need + need / 8 + 2 * growth, std::numeric_limits<int>::max());
     if (have == 0) list.clear();  // frees the block: nothing in it to copy
     list.reserve(static_cast<int>(want));
   }
+  last_need.swap(need_now);
 }
 
 }  // namespace
@@ -396,7 +408,7 @@ void Installation::senseOncePerStep() {
     stats_.round_cap_hits = result.stats.round_cap_hits;
     stats_.flagged_pairs = result.stats.flagged_pairs;
     stats_.candidate_pairs = result.candidates.size();
-    reserveContacts(result.candidates, registry_);
+    reserveContacts(result.candidates, registry_, contact_need_);
     stats_.repartitions = result.stats.repartitions;
     step_ok_ = true;
   } catch (const std::exception& error) {

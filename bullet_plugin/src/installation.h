@@ -16,6 +16,8 @@
 #include <optional>
 #include <unordered_map>
 #include <unordered_set>
+#include <utility>
+#include <vector>
 
 class btSoftRigidDynamicsWorld;
 class btCollisionDispatcher;
@@ -114,6 +116,9 @@ class Installation {
   std::unordered_set<std::uint64_t> collided_pairs_;  ///< body-id pairs collided in this step
   /// Settings::runaway_sharing: body-id pairs that ran away and have not had a step without contact.
   std::unordered_set<std::uint64_t> sharing_pairs_;
+  /// Each body's candidates of the last step (by body id, ascending): how fast its contact array
+  /// grows (reserveContacts).
+  std::vector<std::pair<psc::BodyId, std::size_t>> contact_need_;
   Stats stats_;
   SoftBodySolver* solver_ = nullptr;  ///< attached (Plugin::attach)
   double ahead_ms_ = 0.0;            ///< afterPredictMotion's time since the last sensor step

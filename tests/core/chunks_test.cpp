@@ -114,7 +114,8 @@ std::vector<std::array<float, 8>> jitteredRecords(const TriMesh& m, unsigned see
 // single-precision pass and the generic one (double positions; with --swept): every chunk's box
 // holds every corner of its owned triangles, its own vertices' previous positions with the swept
 // bound, and its motion is at least its own vertices' largest |x − x_prev|. Bodies with few and
-// with many chunks give the slots one and two bytes.
+// with many chunks give the slots one and two bytes. The single-precision pass's own-vertex boxes
+// (Body::chunk_own) are exactly the boxes of each chunk's own vertices.
 TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
   for (const std::size_t resolution : {2000u, 20000u}) {
     const TriMesh m = makeTorus(1.0, 0.3, resolution);
@@ -143,7 +144,10 @@ TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
         const auto at = [&](Index u) { return b.positions[u]; };
         const auto before = [&](Index u) { return b.previous[u]; };
         EXPECT_EQ(ch.foreign.slotWidth(), ch.count() < 256 ? 1u : 2u);
-        std::size_t outside = 0, short_motion = 0, loose = 0, long_motion = 0;
+        std::size_t outside = 0, short_motion = 0, loose = 0, long_motion = 0, own_wrong = 0;
+        // The single-precision pass (not swept) also keeps each chunk's own vertices' box, exactly.
+        const bool own_kept = single && !swept;
+        ASSERT_EQ(b.chunk_own.size(), own_kept ? ch.count() : 0u);
         const auto holds = [](const MotionBox& box, const Vec3& p) {
           return (box.lo.array() <= p.array()).all() && (p.array() <= box.hi.array()).all();
         };
@@ -161,6 +165,15 @@ TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
           for (std::size_t k = ch.triangle_begin[c]; k < ch.triangle_begin[c + 1]; ++k)
             for (Index u : ch.triangle(c, k)) take(u);
           double motion = 0.0;
+          Vec3 own_lo = Vec3::Constant(std::numeric_limits<double>::infinity()), own_hi = -own_lo;
+          for (Index u : ch.vertices(c)) {
+            own_lo = own_lo.cwiseMin(at(u));
+            own_hi = own_hi.cwiseMax(at(u));
+          }
+          if (own_kept) {
+            const OwnBox& o = b.chunk_own[c];
+            own_wrong += Vec3(o.lo[0], o.lo[1], o.lo[2]) != own_lo || Vec3(o.hi[0], o.hi[1], o.hi[2]) != own_hi;
+          }
           for (Index u : ch.vertices(c)) {
             take(u);
             outside += !holds(box, at(u)) + (swept && !holds(box, before(u)));
@@ -174,6 +187,7 @@ TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
         EXPECT_EQ(short_motion, 0u) << resolution << (single ? " single" : " double");
         EXPECT_EQ(loose, 0u) << resolution << (single ? " single" : " double") << (swept ? " swept" : "");
         EXPECT_EQ(long_motion, 0u) << resolution << (single ? " single" : " double");
+        EXPECT_EQ(own_wrong, 0u) << resolution;
       }
     }
   }
