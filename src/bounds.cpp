@@ -2653,9 +2653,9 @@ void cullAndCollect(const std::vector<Body*>& bodies, const BodyPairs& pairs, co
   if (total > candidates.capacity()) {
     // An empty list's old block is freed before the new one is taken (a reserve holds both at
     // once). Room for an eighth more and for twice the growth since the last step, so that a list
-    // growing from step to step is not taken anew every step (each new block is a heap growth and
-    // page faults on its first writes: ~0.1–0.3 ms a step at 72k candidates, docs/DECISIONS.md
-    // "Stop 42"), while a list that has stopped growing keeps an eighth.
+    // growing from step to step is not taken anew every step (a new block costs the allocator's
+    // system calls, which took milliseconds at times on a virtual machine: docs/DECISIONS.md,
+    // "Stop 42", the plugin's contact arrays), while a list that has stopped growing keeps an eighth.
     const std::size_t growth = total > params.last_candidates ? total - params.last_candidates : 0;
     if (candidates.empty()) candidates = std::vector<CandidatePair>();
     candidates.reserve(total + total / 8 + 2 * growth);

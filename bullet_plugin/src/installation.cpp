@@ -90,9 +90,10 @@ psc::SensorSettings coreSettings(const Settings& settings) {
 /// contacts' bytes between steps and three times during a growth. An empty array short of room is
 /// freed first, then sized to this step's need, an eighth more and twice its growth since the last
 /// step (`last_need`: each body's need then, by id; replaced by this step's): a growing array is not
-/// taken anew every step (each new block costs heap growth and page faults on its first writes:
-/// 8 tori x 50,000 vertices took 0.1–0.5 ms a step here, and single steps 4–12 ms, with an eighth
-/// alone; docs/DECISIONS.md "Stop 42"), one that stopped growing keeps an eighth.
+/// taken anew every step (a new block costs the allocator's system calls, brk and munmap, which
+/// took milliseconds at times on a virtual machine: with an eighth alone this function took 0.1–0.5
+/// ms a step on 8 tori x 50,000 vertices as they settled, and 4–12 ms in one step of every run;
+/// docs/DECISIONS.md "Stop 42"), one that stopped growing keeps an eighth.
 void reserveContacts(const std::vector<psc::CandidatePair>& candidates, const detail::BodyRegistry& registry,
                      std::vector<std::pair<psc::BodyId, std::size_t>>& last_need) {
   std::vector<std::pair<psc::BodyId, std::size_t>> need_now;
