@@ -195,8 +195,10 @@ void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, con
 
 #if defined(__SSE2__)
 // The packed single-precision pass's pieces, shared by streamBoxesFloat and (with AVX2)
-// streamBoxesFloatRestFit. Per chunk, lo = (x, y, z, 0) and hi = (x, y, z, squared motion of its
-// own vertices); one more box past the last takes what empty foreign slots name and is thrown away.
+// streamBoxesFloatRestFit. Per chunk, its own vertices' box, lo = (x, y, z, 0) and hi = (x, y, z,
+// squared motion), and the box of the corners it borrows (lane 3 zero), merged at the end
+// (finishPackedBoxes); one more borrowed box past the last takes what empty foreign slots name and
+// is thrown away.
 // __m128's alignment attribute is not part of the vector's type: std::array and std::vector align by
 // alignof, which malloc's 16 bytes meet.
 #pragma GCC diagnostic push
@@ -237,21 +239,6 @@ inline bool prefetchApart(const char* base, std::size_t stride, const char* prev
   if (prev == nullptr) return false;
   const auto at = reinterpret_cast<std::uintptr_t>(base), before = reinterpret_cast<std::uintptr_t>(prev);
   return prev_stride != stride || (before > at ? before - at : at - before) >= 64;
-}
-
-/// The packed boxes into `boxes`; each squared motion, rounded in single precision (a few ulps,
-/// < 1e-6 relative), is raised by 1e-6 so that it never falls below the double value, and added to
-/// `sum` (squared until the end of the pass).
-inline void unpackBoxes(const PackedBox* box, std::size_t chunks, std::vector<MotionBox>& boxes, double& sum) {
-  for (std::size_t c = 0; c < chunks; ++c) {
-    alignas(16) float l[4], h[4];
-    _mm_store_ps(l, box[c][0]);
-    _mm_store_ps(h, box[c][1]);
-    boxes[c].lo = Vec3(l[0], l[1], l[2]);
-    boxes[c].hi = Vec3(h[0], h[1], h[2]);
-    boxes[c].motion = static_cast<double>(h[3]) * (1.0 + 1e-6);
-    sum += boxes[c].motion;
-  }
 }
 
 /// streamBoxesFloat's loop over the vertices, in a function of its own so that what it touches
@@ -548,21 +535,22 @@ struct RestRunAvx2 {
 /// --resolution 50000 --steps 40 --pipeline sensors --truth none --no-penetration
 /// --self-collision`, two alternating runs, docs/DECISIONS.md "Stop 35").
 template <typename Slot>
-[[gnu::target("avx2")]] void streamBoxesFloatRestFit(const ChunkLists& ch, const char* base, std::size_t stride,
+[[gnu::target("avx2")]] bool streamBoxesFloatRestFit(const ChunkLists& ch, const char* base, std::size_t stride,
                                                      const char* prev, std::size_t prev_stride,
-                                                     std::vector<MotionBox>& boxes, double& sum, float* copy, RestFit& f,
-                                                     const std::vector<Vec3>& rest) {
+                                                     std::vector<MotionBox>& boxes, std::vector<OwnBox>& own_boxes,
+                                                     float* copy, RestFit& f, const std::vector<Vec3>& rest) {
   const std::size_t n = ch.chunk_of.size(), chunks = ch.count(), regions = f.rot.size();
   const std::uint8_t* slots = ch.foreign.slotData();
-  // Per chunk (and the thrown-away one past the last, which empty slots name): the packed boxes,
-  // and in double the y-box (lo, hi) and the box of its own vertices' displacements (lo, hi),
+  // Per chunk: the packed own and borrowed boxes (and the thrown-away borrowed one past the last,
+  // which empty slots name, as for the y-boxes), and in double the y-box (lo, hi) and the box of its own vertices' displacements (lo, hi),
   // lane 3 unused; per region R's columns.
-  thread_local std::vector<PackedBox> box;
+  thread_local std::vector<PackedBox> box, borrowed;
   thread_local std::vector<Lanes4> ybox;
   thread_local std::vector<Lanes3> cols;
   const __m256d dinf = _mm256_set1_pd(std::numeric_limits<double>::infinity());
   const __m256d ninf = _mm256_set1_pd(-std::numeric_limits<double>::infinity());
-  box.assign(chunks + 1, emptyPackedBox());
+  box.assign(chunks, emptyPackedBox());
+  borrowed.assign(chunks + 1, emptyPackedBox());
   ybox.assign(chunks + 1, Lanes4{{dinf, ninf, dinf, ninf}});
   cols.resize(regions);
   for (std::size_t r = 0; r < regions; ++r)
@@ -571,6 +559,7 @@ template <typename Slot>
   // Raw pointers: the intrinsics' vector types may alias anything, so the vectors' own data
   // pointers would otherwise be read again after every store.
   PackedBox* const bx = box.data();
+  PackedBox* const bb = borrowed.data();
   Lanes4* const yb = ybox.data();
   const Lanes3* const rc = cols.data();
   const Index* const region_of = ch.region_of.data();
@@ -597,8 +586,8 @@ template <typename Slot>
     std::memcpy(fs, slots + 2 * sizeof(Slot) * v, sizeof fs);
     // The second slot behind a branch, as in streamBoxesFloatLoop (one vertex in ten has one).
     const int foreign = fs[1] != none ? 2 : 1;
-    growPacked(bx[fs[0]], xv, xv);
-    if (foreign == 2) growPacked(bx[fs[1]], xv, xv);
+    growPacked(bb[fs[0]], xv, xv);
+    if (foreign == 2) growPacked(bb[fs[1]], xv, xv);
     // The rest fit in double: x, q and d = x − q exactly (a difference of two floats fits).
     const __m256d x4 = _mm256_cvtps_pd(xv);
     const __m256d d4 = _mm256_sub_pd(x4, _mm256_cvtps_pd(qv));
@@ -634,13 +623,12 @@ template <typename Slot>
   // The rare third and later foreign chunks of a vertex.
   for (const auto& [v, fc] : ch.foreign.extra()) {
     const __m128 xv = loadPoint(reinterpret_cast<const float*>(base + std::size_t{v} * stride));
-    growPacked(bx[fc], xv, xv);
+    growPacked(bb[fc], xv, xv);
     const __m256d yf = restOffset(rc[region_of[fc]].v, _mm256_cvtps_pd(xv), rest_at[v].data());
     yb[fc].v[0] = _mm256_min_pd(yb[fc].v[0], yf);
     yb[fc].v[1] = _mm256_max_pd(yb[fc].v[1], yf);
   }
-  if (_mm_movemask_ps(nan) != 0) sum += std::numeric_limits<double>::quiet_NaN();
-  unpackBoxes(bx, chunks, boxes, sum);
+  const bool finite = finishPackedBoxes(bx, bb, chunks, _mm_movemask_ps(nan) != 0, boxes, own_boxes);
   for (std::size_t c = 0; c < chunks; ++c) {
     alignas(32) double a[4];
     Vec3* const into[4] = {&f.chunk_lo[c], &f.chunk_hi[c], &f.move_lo[c], &f.move_hi[c]};
@@ -649,6 +637,7 @@ template <typename Slot>
       *into[k] = Vec3(a[0], a[1], a[2]);
     }
   }
+  return finite;
 }
 
 #endif
@@ -882,10 +871,16 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
   float* const cf = full && is_float ? copy_f.data() : nullptr;
   double* const cd = full && !is_float ? copy_d.data() : nullptr;
   rest_fit = rest_fit && !swept && b.selfCollides();
-  // The packed pass (streamBoxesFloat) leaves every box final, motions and range check included;
-  // the other passes grow boxes from empty and leave that to the loop after them.
+  // The packed passes (streamBoxesFloat, streamBoxesFloatRestFit) leave every box final, motions
+  // and range check included, and keep the own-vertex boxes; the other passes grow boxes from
+  // empty and leave that to the loop after them.
+#if defined(PSC_HAVE_AVX2_PATH)
+  const bool packed_rest = rest_fit && is_float && !paths && prev != nullptr && useAvx2Probes();
+#else
+  const bool packed_rest = false;
+#endif
 #if defined(__SSE2__)
-  const bool packed = !rest_fit && is_float && !swept && !paths;
+  const bool packed = packed_rest || (!rest_fit && is_float && !swept && !paths);
 #else
   const bool packed = false;
 #endif
@@ -895,15 +890,17 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
   }
   bool packed_finite = true;
 #if defined(PSC_HAVE_AVX2_PATH)
-  if (rest_fit && is_float && !paths && prev != nullptr && useAvx2Probes()) {
+  if (packed_rest) {
     startRestFit(b);
     RestFit& f = *b.rest_fit;
+    std::vector<MotionBox>& cb = b.chunk_box;
+    std::vector<OwnBox>& co = b.chunk_own;
     if (ch.foreign.slotWidth() == 1)
-      streamBoxesFloatRestFit<std::uint8_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum, cf, f, b.rest);
+      packed_finite = streamBoxesFloatRestFit<std::uint8_t>(ch, base, stride, prev, prev_stride, cb, co, cf, f, b.rest);
     else if (ch.foreign.slotWidth() == 2)
-      streamBoxesFloatRestFit<std::uint16_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum, cf, f, b.rest);
+      packed_finite = streamBoxesFloatRestFit<std::uint16_t>(ch, base, stride, prev, prev_stride, cb, co, cf, f, b.rest);
     else
-      streamBoxesFloatRestFit<std::uint32_t>(ch, base, stride, prev, prev_stride, b.chunk_box, sum, cf, f, b.rest);
+      packed_finite = streamBoxesFloatRestFit<std::uint32_t>(ch, base, stride, prev, prev_stride, cb, co, cf, f, b.rest);
   } else
 #endif
   if (rest_fit) {
@@ -2453,7 +2450,8 @@ class Collector {
   }
 
   /// Per body met this step, per chunk: the box of its own vertices' motion balls (x ± motion_factor
-  /// × |Δx|), made on first use (most chunks are never near another body).
+  /// × |Δx|), made on first use (most chunks are never near another body); empty for a body whose
+  /// refit kept its own-vertex boxes (Body::chunk_own), which verticesReach takes instead.
   struct BallBoxes {
     std::vector<char> made;
     std::vector<Vec3> lo, hi;
@@ -2462,7 +2460,7 @@ class Collector {
 
   BallBoxes& ballsOf(const Body& V) {
     BallBoxes& b = balls_[V.id];
-    if (b.made.empty()) {
+    if (b.made.empty() && V.chunk_own.empty()) {  // with own boxes verticesReach needs no table
       b.made.assign(V.chunk_box.size(), 0);
       b.lo.resize(V.chunk_box.size());
       b.hi.resize(V.chunk_box.size());
@@ -2481,32 +2479,33 @@ class Collector {
     if (params_.swept) return true;
     // Meeting pairs: a vertex's probes reach at least its own path (gatherVertices).
     const double factor = params_.meeting ? std::max(params_.motion_factor, 1.0) : params_.motion_factor;
-    if (!balls.made[cv] && !V.chunk_own.empty()) {
+    Vec3 lo, hi;
+    if (!V.chunk_own.empty()) {
       // The refit's box of the chunk's own vertices, grown by factor × the chunk's largest own
       // motion (chunk_box's, never below any vertex's |Δx|), holds every ball without reading a
-      // vertex (the loop below reads each, from Bullet's nodes a cache miss apiece on a large body).
-      // Rounding is monotonic, so it also holds the loop's rounded balls.
+      // vertex (the table below reads each, from Bullet's nodes a cache miss apiece on a large
+      // body). Rounding is monotonic, so it also holds the table's rounded balls.
       const OwnBox& own = V.chunk_own[cv];
       const double m = factor * V.chunk_box[cv].motion;
-      balls.lo[cv] = Vec3(double(own.lo[0]) - m, double(own.lo[1]) - m, double(own.lo[2]) - m);
-      balls.hi[cv] = Vec3(double(own.hi[0]) + m, double(own.hi[1]) + m, double(own.hi[2]) + m);
-      balls.made[cv] = 1;
-    }
-    if (!balls.made[cv]) {
-      Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-      const bool moved = !V.previous.empty();
-      for (const Index v : V.chunks.vertices(cv)) {
-        const Vec3 x = V.positions[v];
-        const double m = moved ? factor * (x - V.previous[v]).norm() : 0.0;
-        lo = lo.cwiseMin(Vec3(x.array() - m));
-        hi = hi.cwiseMax(Vec3(x.array() + m));
+      lo = Vec3(double(own.lo[0]) - m, double(own.lo[1]) - m, double(own.lo[2]) - m);
+      hi = Vec3(double(own.hi[0]) + m, double(own.hi[1]) + m, double(own.hi[2]) + m);
+    } else {
+      if (!balls.made[cv]) {
+        Vec3 l = Vec3::Constant(std::numeric_limits<double>::infinity()), h = -l;
+        const bool moved = !V.previous.empty();
+        for (const Index v : V.chunks.vertices(cv)) {
+          const Vec3 x = V.positions[v];
+          const double m = moved ? factor * (x - V.previous[v]).norm() : 0.0;
+          l = l.cwiseMin(Vec3(x.array() - m));
+          h = h.cwiseMax(Vec3(x.array() + m));
+        }
+        balls.lo[cv] = l;
+        balls.hi[cv] = h;
+        balls.made[cv] = 1;
       }
-      balls.lo[cv] = lo;
-      balls.hi[cv] = hi;
-      balls.made[cv] = 1;
+      lo = balls.lo[cv];
+      hi = balls.hi[cv];
     }
-    const Vec3& lo = balls.lo[cv];
-    const Vec3& hi = balls.hi[cv];
     if (!(lo.array() <= hi.array()).all()) return false;  // no own vertex
     const double g = margin_sum * (1.0 + 1e-9) + 1e-9 * std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff());
     const MotionBox& t = T.chunk_box[ct];
