@@ -2,6 +2,7 @@
 // soft-soft pipeline side by side, measured against an exact ground truth. Without arguments it
 // runs the default suite and writes results/ (see suite.h).
 #include "mesh_file.h"
+#include "psc/bullet/memory.h"
 #include "psc/error.h"
 #include "scenes.h"
 #include "sensor_pipeline.h"
@@ -58,6 +59,7 @@ void listScenes() {
 
 int main(int argc, char** argv) {
   if (argc == 1) {
+    psc::bullet::alignLargeBulletBlocks();
     std::cerr << "psc_demo: no arguments: running the default suite (every scene, all three pipelines, both ground truths; "
                  "results/ gets demo.json, demo.csv and plots/). psc_demo --help lists the options.\n";
     return runSuite(defaultSuite(), defaultSuiteOptions(), std::cout, std::cerr);
@@ -150,6 +152,11 @@ int main(int argc, char** argv) {
                  "our pipelines: all (every pair the exact test accepts, Bullet's model; default) or nearest (per node "
                  "and body it touches, the nearest face's contact: psc::bullet::Settings::contacts)")
       ->check(CLI::IsMember({"all", "nearest"}));
+  bool default_alignment = false;
+  app.add_flag("--bullet-default-alignment", default_alignment,
+               "keep Bullet's own allocator for every pipeline: its large arrays then start 32 bytes into a cache "
+               "line, and each node's m_x and m_q lie on two lines (without it, psc::bullet::alignLargeBulletBlocks "
+               "is called before any body is made)");
   app.add_flag("--no-penetration", no_penetration, "skip the inside tests after each step");
   app.add_flag("--list-scenes", list, "list the scenes and exit");
   try {
@@ -157,6 +164,7 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
+  if (!default_alignment) psc::bullet::alignLargeBulletBlocks();
   if (list) {
     listScenes();
     return 0;

@@ -8,6 +8,10 @@
 // ablation (`psc_demo --pipeline all`, bounds / sensors) measures amid a whole simulation.
 //
 //   build/release/demos/psc_midphase_bench [--benchmark_filter=...] [--benchmark_repetitions=5]
+//                                          [--bullet-default-alignment]
+//
+// Bullet's large arrays start on cache lines (psc::bullet::alignLargeBulletBlocks, as in psc_demo)
+// unless --bullet-default-alignment keeps Bullet's own allocator.
 //
 // tori_pile_8x50000/sensors and /bounds are the speed target's 8 tori × 50,000 vertices over its 40
 // steps (recorded when first selected); /refit and /read time the refit alone against the memory it
@@ -20,6 +24,7 @@
 // (rest shape: the first recorded frame) and count its candidates too (self_candidates): beside
 // `sensors`, what self-collision costs where the bodies do not fold.
 #include "plugin_scene.h"
+#include "psc/bullet/memory.h"
 #include "psc/world.h"
 
 #include <benchmark/benchmark.h>
@@ -194,6 +199,16 @@ struct Case {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // --bullet-default-alignment (ours, taken out before Google Benchmark sees the arguments): keep
+  // Bullet's own allocator, whose node arrays put each node's m_x and m_q on two cache lines.
+  bool default_alignment = false;
+  int kept = 1;
+  for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--bullet-default-alignment") default_alignment = true;
+    else argv[kept++] = argv[i];
+  }
+  argc = kept;
+  if (!default_alignment) psc::bullet::alignLargeBulletBlocks();
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   // The suite's heaviest scenes at the ablation's resolution, and the 8-tori pile of the speed target.

@@ -1,5 +1,6 @@
 #include "report.h"
 
+#include "psc/bullet/memory.h"
 #include "psc/error.h"
 
 #include <LinearMath/btScalar.h>
@@ -74,6 +75,7 @@ MachineInfo machineInfo() {
   const int v = btGetVersion();
   m.bullet_version = std::to_string(v / 100) + "." + (v % 100 < 10 ? "0" : "") + std::to_string(v % 100);
   m.bullet_precision = sizeof(btScalar) == sizeof(double) ? "double" : "single";
+  m.bullet_blocks = psc::bullet::largeBulletBlocksAligned() ? "line-aligned" : "default";
   const std::time_t now = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
   char buf[32];
   std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
@@ -84,7 +86,7 @@ MachineInfo machineInfo() {
 std::string machineLine(const MachineInfo& m) {
   return m.date + ", " + std::to_string(m.cores) + " cores (" + (m.cpu.empty() ? "cpu unknown" : m.cpu) +
          "), pipelines single-threaded, " + m.build_type + " build, " + m.compiler + ", Bullet " + m.bullet_version + " (" +
-         m.bullet_precision + " precision)";
+         m.bullet_precision + " precision, " + m.bullet_blocks + " arrays)";
 }
 
 const std::vector<std::string>& requiredRunKeys() {
@@ -101,6 +103,7 @@ nlohmann::ordered_json toJson(const MachineInfo& m) {
   return {{"cores", m.cores},           {"cpu", m.cpu},
           {"compiler", m.compiler},     {"build_type", m.build_type},
           {"bullet_version", m.bullet_version}, {"bullet_precision", m.bullet_precision},
+          {"bullet_blocks", m.bullet_blocks},
           {"threads", m.threads},       {"date", m.date}};
 }
 

@@ -16,6 +16,9 @@ namespace psc::demo {
 struct MachineInfo {
   unsigned cores = 0;
   std::string cpu, compiler, build_type, bullet_version, bullet_precision, date;
+  /// "line-aligned" (psc::bullet::alignLargeBulletBlocks, the demo's default) or "default"
+  /// (--bullet-default-alignment): where Bullet's large arrays, the nodes among them, start.
+  std::string bullet_blocks;
   int threads = 1;  ///< the pipelines run single-threaded (the measurements between steps use a second thread)
 };
 MachineInfo machineInfo();

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "psc/bullet/exact.h"
+#include "psc/bullet/memory.h"
 #include "psc/bullet/plugin.h"
 #include "psc/bullet/precision.h"
 #include "psc/bullet/settings.h"
