@@ -335,7 +335,9 @@ bool finishPackedBoxes(const PackedBox* own, const PackedBox* borrowed, std::siz
 /// upper box's fourth lane and one prefetch for Bullet's node (m_x and m_q are 16 bytes apart; in
 /// a node array that starts 32 bytes into a line, as Bullet's allocator places one that glibc maps
 /// on its own, they lie in two lines, and the hardware's prefetchers bring the second: a prefetch
-/// of it measured no difference, docs/DECISIONS.md "Stop 33")
+/// of it measured no difference, docs/DECISIONS.md "Stop 33"; reading one line instead, with
+/// psc::bullet::alignLargeBulletBlocks, took the refit from 5.5–6.0 to 4.9–5.4 ns a vertex,
+/// docs/BULLET.md "Node arrays on cache lines")
 /// (psc_demo --scene tori_pile --bodies 8 --resolution 50000 --steps 40 --pipeline sensors
 /// --truth none, refit_ms_mean, two or three alternating runs each).
 /// The corners a chunk borrows grow a box of their own, merged with the own vertices' at the end
