@@ -5,7 +5,10 @@
 // appended to m_scontacts included) on exactly those pairs.
 //
 //   build/release/demos/psc_exact_bench [--benchmark_filter=...] [--benchmark_repetitions=5]
+//                                       [--bullet-default-alignment]
 //
+// Bullet's large arrays start on cache lines (psc::bullet::alignLargeBulletBlocks, as in psc_demo)
+// unless --bullet-default-alignment keeps Bullet's own allocator.
 // The counter per_test is the wall time of one test (seconds, e.g. 45n = 45 ns); ratios to the
 // Bullet row of the same scene are what README "Exact tests" quotes. The rows `*_pairwise` run
 // the same tests pair by pair instead of eight at a time with AVX
@@ -127,6 +130,7 @@ struct Case {
 }  // namespace
 
 int main(int argc, char** argv) {
+  psc::demo::alignBulletBlocksUnlessAsked(argc, argv);
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   // Real pairs: spheres meeting, a fast impact (large motion terms), and the mesh scene whose

@@ -24,7 +24,6 @@
 // (rest shape: the first recorded frame) and count its candidates too (self_candidates): beside
 // `sensors`, what self-collision costs where the bodies do not fold.
 #include "plugin_scene.h"
-#include "psc/bullet/memory.h"
 #include "psc/world.h"
 
 #include <benchmark/benchmark.h>
@@ -199,16 +198,7 @@ struct Case {
 }  // namespace
 
 int main(int argc, char** argv) {
-  // --bullet-default-alignment (ours, taken out before Google Benchmark sees the arguments): keep
-  // Bullet's own allocator, whose node arrays put each node's m_x and m_q on two cache lines.
-  bool default_alignment = false;
-  int kept = 1;
-  for (int i = 1; i < argc; ++i) {
-    if (std::string(argv[i]) == "--bullet-default-alignment") default_alignment = true;
-    else argv[kept++] = argv[i];
-  }
-  argc = kept;
-  if (!default_alignment) psc::bullet::alignLargeBulletBlocks();
+  psc::demo::alignBulletBlocksUnlessAsked(argc, argv);
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   // The suite's heaviest scenes at the ablation's resolution, and the 8-tori pile of the speed target.

@@ -34,4 +34,18 @@ inline PluginScene makePluginScene(const std::string& name, const SceneParams& p
   return p;
 }
 
+/// The benchmarks' start: takes `--bullet-default-alignment` out of the arguments (before Google
+/// Benchmark sees them) and, unless it was given, puts Bullet's large arrays on cache lines
+/// (psc::bullet::alignLargeBulletBlocks), as psc_demo does for every pipeline.
+inline void alignBulletBlocksUnlessAsked(int& argc, char** argv) {
+  bool default_alignment = false;
+  int kept = 1;
+  for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--bullet-default-alignment") default_alignment = true;
+    else argv[kept++] = argv[i];
+  }
+  argc = kept;
+  if (!default_alignment) psc::bullet::alignLargeBulletBlocks();
+}
+
 }  // namespace psc::demo
