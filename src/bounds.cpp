@@ -544,8 +544,8 @@ template <typename Slot>
   const std::size_t n = ch.chunk_of.size(), chunks = ch.count(), regions = f.rot.size();
   const std::uint8_t* slots = ch.foreign.slotData();
   // Per chunk: the packed own and borrowed boxes (and the thrown-away borrowed one past the last,
-  // which empty slots name, as for the y-boxes), and in double the y-box (lo, hi) and the box of its own vertices' displacements (lo, hi),
-  // lane 3 unused; per region R's columns.
+  // which empty slots name, as for the y-boxes), and in double the y-box (lo, hi) and the box of
+  // its own vertices' displacements (lo, hi), lane 3 unused; per region R's columns.
   thread_local std::vector<PackedBox> box, borrowed;
   thread_local std::vector<Lanes4> ybox;
   thread_local std::vector<Lanes3> cols;
@@ -839,6 +839,15 @@ void measureRegions(Body& b, bool full, std::size_t sample_chunks, const char* b
   b.shape.max_edge = std::sqrt(max_edge2);
 }
 
+/// Calls `f` with a value of the unsigned type of `width` bytes (1, 2 or 4: ChunkLists::foreign's
+/// slotWidth()), so that a pass templated on its slots' type is chosen in one place.
+template <typename F>
+auto bySlotType(unsigned width, F&& f) {
+  if (width == 1) return f(std::uint8_t{});
+  if (width == 2) return f(std::uint16_t{});
+  return f(std::uint32_t{});
+}
+
 }  // namespace
 
 void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
@@ -895,14 +904,10 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
   if (packed_rest) {
     startRestFit(b);
     RestFit& f = *b.rest_fit;
-    std::vector<MotionBox>& cb = b.chunk_box;
-    std::vector<OwnBox>& co = b.chunk_own;
-    if (ch.foreign.slotWidth() == 1)
-      packed_finite = streamBoxesFloatRestFit<std::uint8_t>(ch, base, stride, prev, prev_stride, cb, co, cf, f, b.rest);
-    else if (ch.foreign.slotWidth() == 2)
-      packed_finite = streamBoxesFloatRestFit<std::uint16_t>(ch, base, stride, prev, prev_stride, cb, co, cf, f, b.rest);
-    else
-      packed_finite = streamBoxesFloatRestFit<std::uint32_t>(ch, base, stride, prev, prev_stride, cb, co, cf, f, b.rest);
+    packed_finite = bySlotType(ch.foreign.slotWidth(), [&](auto slot) {
+      return streamBoxesFloatRestFit<decltype(slot)>(ch, base, stride, prev, prev_stride, b.chunk_box, b.chunk_own, cf,
+                                                     f, b.rest);
+    });
   } else
 #endif
   if (rest_fit) {
@@ -918,12 +923,9 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
     NoRestFit none;
 #if defined(__SSE2__)
     if (packed) {
-      if (ch.foreign.slotWidth() == 1)
-        packed_finite = streamBoxesFloat<std::uint8_t>(ch, base, stride, prev, prev_stride, b.chunk_box, b.chunk_own, cf);
-      else if (ch.foreign.slotWidth() == 2)
-        packed_finite = streamBoxesFloat<std::uint16_t>(ch, base, stride, prev, prev_stride, b.chunk_box, b.chunk_own, cf);
-      else
-        packed_finite = streamBoxesFloat<std::uint32_t>(ch, base, stride, prev, prev_stride, b.chunk_box, b.chunk_own, cf);
+      packed_finite = bySlotType(ch.foreign.slotWidth(), [&](auto slot) {
+        return streamBoxesFloat<decltype(slot)>(ch, base, stride, prev, prev_stride, b.chunk_box, b.chunk_own, cf);
+      });
     } else
 #endif
     if (is_float)
