@@ -58,6 +58,7 @@ class PackedIndices {
     }
   }
   unsigned width() const { return width_; }
+  std::size_t size() const { return data_.size() / width_; }
   const std::uint8_t* data() const { return data_.data(); }
   std::size_t bytes() const { return data_.capacity(); }
 
@@ -131,11 +132,21 @@ struct ChunkLists {
   PackedIndices corners;              ///< per owned triangle, its 3 vertices as positions in the table
   std::vector<Index> region_begin;  ///< chunks of region r are [region_begin[r], region_begin[r+1])
   std::vector<Index> region_of;     ///< region of each chunk
-  /// The refit streams through the vertices in index order (the positions' memory order):
-  std::vector<Index> chunk_of;      ///< chunk owning each vertex (kInvalidIndex: in no chunk)
+  /// The refit streams through the vertices in index order (the positions' memory order): per
+  /// vertex, the chunk that owns it (foreign.none(), the chunk count, for a vertex of no region),
+  /// in the fewest bytes that hold the chunk count, as `foreign`'s slots: 1 byte a vertex below
+  /// 256 chunks, 2 below 65,536. (A vertex on no triangle has a region, the partition's nearest,
+  /// and so a chunk.)
+  PackedIndices owner;
   ForeignChunks foreign;            ///< per vertex, the other chunks whose owned triangles it is in
 
   std::size_t count() const { return table_begin.size() - 1; }
+  std::size_t vertexCount() const { return owner.size(); }
+  /// The chunk owning vertex v (kInvalidIndex: in no chunk).
+  Index chunkOf(std::size_t v) const {
+    const Index c = owner[v];
+    return c == foreign.none() ? kInvalidIndex : c;
+  }
   /// Own vertices of chunk c, ascending.
   IndexRange vertices(Index c) const { return {table.data() + table_begin[c], table.data() + own_end[c]}; }
   std::size_t triangleCount(Index c) const { return triangle_begin[c + 1] - triangle_begin[c]; }
@@ -161,7 +172,7 @@ struct ChunkLists {
                              : corners[3 * k] == at || corners[3 * k + 1] == at || corners[3 * k + 2] == at)
           f(triangleId(c, k), triangle(c, k));
     };
-    const Index own = chunk_of[v];
+    const Index own = chunkOf(v);
     if (own == kInvalidIndex) return;
     const Index* t = table.data();
     scan(own, static_cast<Index>(std::lower_bound(t + table_begin[own], t + own_end[own], v) - (t + table_begin[own])));
@@ -175,9 +186,9 @@ struct ChunkLists {
   std::vector<Index> regionOfVertices() const;
   std::size_t bytes() const {
     return (table.capacity() + table_begin.capacity() + own_end.capacity() + triangle_begin.capacity() +
-            triangle_base.capacity() + region_begin.capacity() + region_of.capacity() + chunk_of.capacity()) *
+            triangle_base.capacity() + region_begin.capacity() + region_of.capacity()) *
                sizeof(Index) +
-           triangle_offset.bytes() + corners.bytes() + foreign.bytes();
+           owner.bytes() + triangle_offset.bytes() + corners.bytes() + foreign.bytes();
   }
 };
 

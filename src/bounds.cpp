@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -146,12 +147,12 @@ class RestFitPass {
 template <typename T, typename Hook>
 void streamBoxes(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev, std::size_t prev_stride,
                  bool swept, bool paths, std::vector<MotionBox>& boxes, double& sum, Hook& hook, T* copy) {
-  const std::size_t n = ch.chunk_of.size();
+  const std::size_t n = ch.vertexCount();
   for (std::size_t v = 0; v < n; ++v) {
     // Positions usually live inside larger records (Bullet's nodes are 256 bytes): fetch ahead.
     __builtin_prefetch(base + (v + 24) * stride);
     if (prev != nullptr) __builtin_prefetch(prev + (v + 24) * prev_stride);
-    const Index c = ch.chunk_of[v];
+    const Index c = ch.chunkOf(v);
     if (c == kInvalidIndex) continue;
     const T* p = reinterpret_cast<const T*>(base + v * stride);
     if (copy != nullptr) std::copy(p, p + 3, copy + 3 * v);
@@ -258,7 +259,7 @@ inline bool prefetchApart(const char* base, std::size_t stride, const char* prev
 /// (one vertex in ten: 7.7% on the 50,000-vertex tori) is updated behind a branch, which also ends
 /// the chain of updates through the thrown-away box every vertex without one made.
 template <typename Slot, bool kPrev, bool kCopy>
-[[gnu::noinline]] __m128 streamBoxesFloatLoop(const Index* __restrict chunk_of, const std::uint8_t* __restrict slots,
+[[gnu::noinline]] __m128 streamBoxesFloatLoop(const std::uint8_t* __restrict owner, const std::uint8_t* __restrict slots,
                                               std::size_t n, const char* base, std::size_t stride, const char* prev,
                                               std::size_t prev_stride, bool prev_apart, PackedBox* __restrict box,
                                               PackedBox* __restrict borrowed, float* __restrict copy, Slot none) {
@@ -266,8 +267,9 @@ template <typename Slot, bool kPrev, bool kCopy>
   for (std::size_t v = 0; v < n; ++v) {
     __builtin_prefetch(base + (v + 24) * stride);
     if (kPrev && prev_apart) __builtin_prefetch(prev + (v + 24) * prev_stride);
-    const Index c = chunk_of[v];
-    if (c == kInvalidIndex) continue;
+    Slot c;
+    std::memcpy(&c, owner + sizeof(Slot) * v, sizeof c);
+    if (c == none) continue;  // on no triangle
     const float* p = reinterpret_cast<const float*>(base + v * stride);
     if (kCopy) std::memcpy(copy + 3 * v, p, 3 * sizeof(float));
     const __m128 xv = loadPoint(p);  // (x, y, z, 0)
@@ -348,13 +350,14 @@ template <typename Slot>
 bool streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride, const char* prev,
                       std::size_t prev_stride, std::vector<MotionBox>& boxes, std::vector<OwnBox>& own_boxes,
                       float* copy) {
-  const std::size_t n = ch.chunk_of.size(), chunks = ch.count();
+  const std::size_t n = ch.vertexCount(), chunks = ch.count();
   const std::uint8_t* slots = ch.foreign.slotData();
+  assert(ch.owner.width() == sizeof(Slot) && ch.foreign.slotWidth() == sizeof(Slot));
   thread_local std::vector<PackedBox> own, borrowed;
   own.assign(chunks, emptyPackedBox());
   borrowed.assign(chunks + 1, emptyPackedBox());
   const bool prev_apart = prefetchApart(base, stride, prev, prev_stride);
-  const Index* chunk_of = ch.chunk_of.data();
+  const std::uint8_t* owner = ch.owner.data();
   PackedBox* o = own.data();
   PackedBox* b = borrowed.data();
   const auto none = static_cast<Slot>(ch.foreign.none());
@@ -362,7 +365,7 @@ bool streamBoxesFloat(const ChunkLists& ch, const char* base, std::size_t stride
   // prev_apart false; without a copy, copy is null).
   const auto loop = [&](auto with_prev, auto with_copy) {
     return streamBoxesFloatLoop<Slot, decltype(with_prev)::value, decltype(with_copy)::value>(
-        chunk_of, slots, n, base, stride, prev, prev_stride, prev_apart, o, b, copy, none);
+        owner, slots, n, base, stride, prev, prev_stride, prev_apart, o, b, copy, none);
   };
   using Yes = std::true_type;
   using No = std::false_type;
@@ -541,8 +544,9 @@ template <typename Slot>
                                                      const char* prev, std::size_t prev_stride,
                                                      std::vector<MotionBox>& boxes, std::vector<OwnBox>& own_boxes,
                                                      float* copy, RestFit& f, const std::vector<Vec3>& rest) {
-  const std::size_t n = ch.chunk_of.size(), chunks = ch.count(), regions = f.rot.size();
+  const std::size_t n = ch.vertexCount(), chunks = ch.count(), regions = f.rot.size();
   const std::uint8_t* slots = ch.foreign.slotData();
+  assert(ch.owner.width() == sizeof(Slot) && ch.foreign.slotWidth() == sizeof(Slot));
   // Per chunk: the packed own and borrowed boxes (and the thrown-away borrowed one past the last,
   // which empty slots name, as for the y-boxes), and in double the y-box (lo, hi) and the box of
   // its own vertices' displacements (lo, hi), lane 3 unused; per region R's columns.
@@ -565,7 +569,7 @@ template <typename Slot>
   Lanes4* const yb = ybox.data();
   const Lanes3* const rc = cols.data();
   const Index* const region_of = ch.region_of.data();
-  const Index* const chunk_of = ch.chunk_of.data();
+  const std::uint8_t* const owner = ch.owner.data();
   const Vec3* const rest_at = rest.data();
   const auto none = static_cast<Slot>(ch.foreign.none());
   RestRunAvx2 run;
@@ -575,8 +579,9 @@ template <typename Slot>
   for (std::size_t v = 0; v < n; ++v) {
     __builtin_prefetch(base + (v + 24) * stride);
     if (prev_apart) __builtin_prefetch(prev + (v + 24) * prev_stride);
-    const Index c = chunk_of[v];
-    if (c == kInvalidIndex) continue;
+    Slot c;
+    std::memcpy(&c, owner + sizeof(Slot) * v, sizeof c);
+    if (c == none) continue;  // on no triangle
     const float* p = reinterpret_cast<const float*>(base + v * stride);
     if (copy != nullptr) std::memcpy(copy + 3 * v, p, 3 * sizeof(float));
     const __m128 xv = loadPoint(p);  // (x, y, z, 0)
@@ -876,9 +881,9 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
   std::vector<float> copy_f;
   std::vector<double> copy_d;
   if (full && is_float)
-    copy_f.resize(3 * ch.chunk_of.size());
+    copy_f.resize(3 * ch.vertexCount());
   else if (full)
-    copy_d.resize(3 * ch.chunk_of.size());
+    copy_d.resize(3 * ch.vertexCount());
   float* const cf = full && is_float ? copy_f.data() : nullptr;
   double* const cd = full && !is_float ? copy_d.data() : nullptr;
   rest_fit = rest_fit && !swept && b.selfCollides();
@@ -942,15 +947,16 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
     }
   }
   if (!same_type && (swept || paths)) {
-    for (std::size_t v = 0; v < ch.chunk_of.size(); ++v) {
-      if (ch.chunk_of[v] == kInvalidIndex) continue;
+    for (std::size_t v = 0; v < ch.vertexCount(); ++v) {
+      const Index own = ch.chunkOf(v);
+      if (own == kInvalidIndex) continue;
       const Vec3 q = b.previous[static_cast<Index>(v)];
       sum += q.sum();
       const auto add = [&](Index c) {
         b.chunk_box[c].lo = b.chunk_box[c].lo.cwiseMin(q);
         b.chunk_box[c].hi = b.chunk_box[c].hi.cwiseMax(q);
       };
-      add(ch.chunk_of[v]);
+      add(own);
       ch.foreign.forEach(static_cast<Index>(v), add);
     }
     finite = finite && std::isfinite(sum);
@@ -2142,8 +2148,8 @@ class Collector {
     const bool seeded = params_.nearest && params_.seeds != nullptr && ahead_steps == 0.0;
     if (params_.nearest) {
       const double inf = std::numeric_limits<double>::infinity();
-      if (least_.size() < A.chunks.chunk_of.size()) least_.resize(A.chunks.chunk_of.size(), inf);
-      if (least_b_.size() < B.chunks.chunk_of.size()) least_b_.resize(B.chunks.chunk_of.size(), inf);
+      if (least_.size() < A.chunks.vertexCount()) least_.resize(A.chunks.vertexCount(), inf);
+      if (least_b_.size() < B.chunks.vertexCount()) least_b_.resize(B.chunks.vertexCount(), inf);
       if (seeded) {
         seedNearest(A, B, least_, seeded_a_);
         seedNearest(B, A, least_b_, seeded_b_);
@@ -2218,8 +2224,8 @@ class Collector {
     const double exclude = params_.self_rest_exclusion * radius;
     Group g{X.id, X.id, {}, {}, {}};
     const Axis no_axis;
-    if (params_.nearest && least_.size() < X.chunks.chunk_of.size())
-      least_.resize(X.chunks.chunk_of.size(), std::numeric_limits<double>::infinity());
+    if (params_.nearest && least_.size() < X.chunks.vertexCount())
+      least_.resize(X.chunks.vertexCount(), std::numeric_limits<double>::infinity());
     // The rest-shape bound needs the radius bound's reach (a swept pair may meet during the step).
     const bool rest_bound = params_.self_rest_bound && self_motion;
     PairContext ctx{X,         X,  radius, half, mf, params_.swept, no_axis, g.keys, counters_, s_, exclude * exclude,

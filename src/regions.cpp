@@ -122,7 +122,8 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
     for (Index v : tri)
       if (chunk_of[v] != owner) bpairs.emplace_back(v, owner);
   }
-  out.chunk_of = std::move(chunk_of);
+  out.owner = PackedIndices(topology.vertexCount(), chunk);
+  for (Index v = 0; v < topology.vertexCount(); ++v) out.owner.set(v, chunk_of[v] == kInvalidIndex ? chunk : chunk_of[v]);
   out.foreign = ForeignChunks(topology.vertexCount(), chunk, bpairs);
   // Each chunk's table: its own vertices, then the foreign ones its triangles use.
   for (auto& [v, c] : bpairs) std::swap(v, c);
@@ -170,7 +171,7 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
       // A vertex is among the chunk's own vertices or, failing that, its foreign ones.
       for (std::size_t i = 0; i < 3; ++i) {
         const Index v = topology.triangle(owned.items[k])[i];
-        const Index* at = out.chunk_of[v] == c ? std::lower_bound(first, mid, v) : std::lower_bound(mid, last, v);
+        const Index* at = chunk_of[v] == c ? std::lower_bound(first, mid, v) : std::lower_bound(mid, last, v);
         out.corners.set(3 * k + i, static_cast<Index>(at - first));
       }
     }
@@ -188,9 +189,9 @@ std::vector<Triangle> ChunkLists::meshTriangles() const {
 }
 
 std::vector<Index> ChunkLists::regionOfVertices() const {
-  std::vector<Index> out(chunk_of.size(), kInvalidIndex);
-  for (std::size_t v = 0; v < chunk_of.size(); ++v)
-    if (chunk_of[v] != kInvalidIndex) out[v] = region_of[chunk_of[v]];
+  std::vector<Index> out(vertexCount(), kInvalidIndex);
+  for (std::size_t v = 0; v < out.size(); ++v)
+    if (const Index c = chunkOf(v); c != kInvalidIndex) out[v] = region_of[c];
   return out;
 }
 

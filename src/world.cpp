@@ -212,7 +212,7 @@ const std::vector<Index>& SensorWorld::Impl::ringOf(std::size_t particle, const 
   ring.vertices.clear();
   b.chunks.forEachTriangleOf(v, [&](Index, const Triangle& tri) {
     for (Index u : tri)
-      if (u != v && b.chunks.region_of[b.chunks.chunk_of[u]] == region) ring.vertices.push_back(u);
+      if (u != v && b.chunks.region_of[b.chunks.chunkOf(u)] == region) ring.vertices.push_back(u);
   });
   std::sort(ring.vertices.begin(), ring.vertices.end());
   ring.vertices.erase(std::unique(ring.vertices.begin(), ring.vertices.end()), ring.vertices.end());

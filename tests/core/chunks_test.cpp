@@ -77,7 +77,7 @@ TEST(ForeignChunks, HoldEveryCornerOfTheChunksOwnedTrianglesOnATorus) {
   for (Index c = 0; c < ch.count(); ++c)
     for (std::size_t k = ch.triangle_begin[c]; k < ch.triangle_begin[c + 1]; ++k)
       for (Index u : ch.triangle(c, k))
-        if (ch.chunk_of[u] != c) expected[u].insert(c);
+        if (ch.chunkOf(u) != c) expected[u].insert(c);
   std::size_t listed = 0, three = 0;
   for (Index v = 0; v < m.vertices.size(); ++v) {
     const std::vector<Index> got = foreignOf(ch.foreign, v);
@@ -144,6 +144,13 @@ TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
         const auto at = [&](Index u) { return b.positions[u]; };
         const auto before = [&](Index u) { return b.previous[u]; };
         EXPECT_EQ(ch.foreign.slotWidth(), ch.count() < 256 ? 1u : 2u);
+        // The owner of each vertex is stored in the slots' width, which the refit's passes rely on.
+        EXPECT_EQ(ch.owner.width(), ch.foreign.slotWidth());
+        ASSERT_EQ(ch.vertexCount(), n);
+        std::size_t owner_wrong = 0;
+        for (Index c = 0; c < ch.count(); ++c)
+          for (Index u : ch.vertices(c)) owner_wrong += ch.chunkOf(u) != c;
+        EXPECT_EQ(owner_wrong, 0u);
         std::size_t outside = 0, short_motion = 0, loose = 0, long_motion = 0, own_wrong = 0;
         // The single-precision pass (not swept) also keeps each chunk's own vertices' box, exactly.
         const bool own_kept = single && !swept;

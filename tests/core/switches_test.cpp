@@ -335,8 +335,8 @@ TEST(Memory, MidphaseBytesStayFlatOverALongDeformingRun) {
 
 TEST(Memory, AtMost32BytesPerVertexAndEveryContactFound) {
   // Two 20k-vertex spheres pressed into each other. After partitioning the midphase keeps only what
-  // a step reads (docs/DECISIONS.md, "Midphase memory"): at most 32 bytes per vertex (measured 29.6
-  // on 8 tori of 50k vertices). The full topology and region_of come back for inspection, equal to
+  // a step reads (docs/DECISIONS.md, "Midphase memory"): at most 32 bytes per vertex (measured 23.8
+  // on 8 tori of 50k vertices, docs/DECISIONS.md "Stop 44"). The full topology and region_of come back for inspection, equal to
   // what the mesh gives, and go again at the next step. Every contact within the margins is a
   // candidate, once.
   constexpr double kMargin = 0.02;
