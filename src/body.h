@@ -224,6 +224,44 @@ inline bool flaggedLess(const FlaggedPair& a, const FlaggedPair& b) {
   return a.region_b < b.region_b;
 }
 
+/// A self-colliding body's rest shape: each vertex's position when self-collision was switched on,
+/// kept in the precision the positions came in, so every value is the one given: single for
+/// Bullet's nodes (12 bytes a vertex instead of 24), double otherwise. Read as Vec3.
+class RestShape {
+ public:
+  RestShape() = default;
+  explicit RestShape(const PositionView& positions) : size_(positions.size()) {
+    if (positions.scalar() == PositionView::Scalar::Float32) {
+      single_.resize(3 * size_);
+      for (std::size_t v = 0; v < size_; ++v) {
+        const float* p =
+            reinterpret_cast<const float*>(static_cast<const char*>(positions.data()) + v * positions.strideBytes());
+        std::copy(p, p + 3, single_.data() + 3 * v);
+      }
+    } else {
+      double_.resize(size_);
+      for (std::size_t v = 0; v < size_; ++v) double_[v] = positions[v];
+    }
+  }
+  bool empty() const { return size_ == 0; }
+  std::size_t size() const { return size_; }
+  Vec3 operator[](std::size_t v) const {
+    if (!single_.empty()) {
+      const float* p = single_.data() + 3 * v;
+      return {p[0], p[1], p[2]};
+    }
+    return double_[v];
+  }
+  /// The coordinates in single precision, three a vertex; null when they are kept in double.
+  const float* single() const { return single_.empty() ? nullptr : single_.data(); }
+  std::size_t bytes() const { return single_.capacity() * sizeof(float) + double_.capacity() * sizeof(Vec3); }
+
+ private:
+  std::vector<float> single_;
+  std::vector<Vec3> double_;
+  std::size_t size_ = 0;
+};
+
 /// [beyond] The rest-shape bound of self-collision (docs/METHOD.md §6.3), riding on the refit.
 /// Per region r a rotation R_r; the refit's pass puts each vertex's y = x − R_r·rest into a box
 /// per chunk (its own chunk and the chunks whose triangles it is in, each with its chunk's region's
@@ -284,7 +322,7 @@ struct Body {
   bool deformable = true;
   std::shared_ptr<const ConvexParts> parts;
   /// Self-collision: on when `rest` holds the rest shape (SensorWorld::setSelfCollision).
-  std::vector<Vec3> rest;
+  RestShape rest;
   double rest_mean_edge = 0.0;  ///< mean edge length of `rest` (the self contact radius's base)
   bool selfCollides() const { return !rest.empty(); }
   /// Only for a self-colliding body (made by its first refit; dropped whenever `rest` or the

@@ -86,7 +86,7 @@ struct NoRestFit {
 /// here while the region stays the same (vertices of one region mostly come in runs).
 class RestFitPass {
  public:
-  RestFitPass(RestFit& f, const ChunkLists& ch, const std::vector<Vec3>& rest) : f_(f), ch_(ch), rest_(rest) {}
+  RestFitPass(RestFit& f, const ChunkLists& ch, const RestShape& rest) : f_(f), ch_(ch), rest_(rest) {}
   [[gnu::always_inline]] void own(std::size_t v, Index c, const Vec3& x, const Vec3* displacement) {
     const Index r = ch_.region_of[c];
     if (r != region_) switchTo(r);
@@ -96,7 +96,7 @@ class RestFitPass {
       sum_motion_ += *displacement;
       moved_ += 1.0;
     }
-    const Vec3& p = rest_[v];
+    const Vec3 p = rest_[v];
     y_ = x - rot_ * p;
     f_.chunk_lo[c] = f_.chunk_lo[c].cwiseMin(y_);
     f_.chunk_hi[c] = f_.chunk_hi[c].cwiseMax(y_);
@@ -131,7 +131,7 @@ class RestFitPass {
 
   RestFit& f_;
   const ChunkLists& ch_;
-  const std::vector<Vec3>& rest_;
+  const RestShape& rest_;
   Eigen::Matrix3d rot_ = Eigen::Matrix3d::Identity();
   Eigen::Matrix3d xr_ = Eigen::Matrix3d::Zero();
   Vec3 sum_x_ = Vec3::Zero();
@@ -521,11 +521,16 @@ struct RestRunAvx2 {
 
 /// y = x − R·p, R given by its columns (lane 3 zero): the operations of Eigen's x − R * p, lane by
 /// lane, (R₀p₀ + R₁p₁) + R₂p₂, so the same bits.
-[[gnu::target("avx2")]] inline __m256d restOffset(const __m256d* cols, __m256d x, const double* p) {
-  const __m256d rp = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(cols[0], _mm256_broadcast_sd(p)),
-                                                 _mm256_mul_pd(cols[1], _mm256_broadcast_sd(p + 1))),
-                                   _mm256_mul_pd(cols[2], _mm256_broadcast_sd(p + 2)));
+[[gnu::target("avx2")]] inline __m256d restOffset(const __m256d* cols, __m256d x, const __m256d* p) {
+  const __m256d rp = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(cols[0], p[0]), _mm256_mul_pd(cols[1], p[1])),
+                                   _mm256_mul_pd(cols[2], p[2]));
   return _mm256_sub_pd(x, rp);
+}
+
+/// A rest position's three coordinates (single precision, as RestShape keeps Bullet's), each
+/// widened to double (exactly) in all four lanes.
+[[gnu::target("avx2")]] inline void broadcastRest(const float* p, __m256d* out) {
+  for (int j = 0; j < 3; ++j) out[j] = _mm256_set1_pd(static_cast<double>(p[j]));
 }
 
 /// streamBoxesFloat with the rest-shape bound's part of the pass (RestFitPass's work), for
@@ -543,7 +548,7 @@ template <typename Slot>
 [[gnu::target("avx2")]] bool streamBoxesFloatRestFit(const ChunkLists& ch, const char* base, std::size_t stride,
                                                      const char* prev, std::size_t prev_stride,
                                                      std::vector<MotionBox>& boxes, std::vector<OwnBox>& own_boxes,
-                                                     float* copy, RestFit& f, const std::vector<Vec3>& rest) {
+                                                     float* copy, RestFit& f, const float* rest) {
   const std::size_t n = ch.vertexCount(), chunks = ch.count(), regions = f.rot.size();
   const std::uint8_t* slots = ch.foreign.slotData();
   assert(ch.owner.width() == sizeof(Slot) && ch.foreign.slotWidth() == sizeof(Slot));
@@ -570,7 +575,6 @@ template <typename Slot>
   const Lanes3* const rc = cols.data();
   const Index* const region_of = ch.region_of.data();
   const std::uint8_t* const owner = ch.owner.data();
-  const Vec3* const rest_at = rest.data();
   const auto none = static_cast<Slot>(ch.foreign.none());
   RestRunAvx2 run;
   clearRun(run);
@@ -608,14 +612,15 @@ template <typename Slot>
     own[3] = _mm256_max_pd(own[3], d4);
     run.sum_d = _mm256_add_pd(run.sum_d, d4);
     run.moved += 1.0;
-    const double* rp = rest_at[v].data();
+    __m256d rp[3];
+    broadcastRest(rest + 3 * v, rp);
     const __m256d y4 = restOffset(rc[r].v, x4, rp);
     own[0] = _mm256_min_pd(own[0], y4);
     own[1] = _mm256_max_pd(own[1], y4);
     run.sum_x = _mm256_add_pd(run.sum_x, x4);
-    run.xr[0] = _mm256_add_pd(run.xr[0], _mm256_mul_pd(x4, _mm256_broadcast_sd(rp)));
-    run.xr[1] = _mm256_add_pd(run.xr[1], _mm256_mul_pd(x4, _mm256_broadcast_sd(rp + 1)));
-    run.xr[2] = _mm256_add_pd(run.xr[2], _mm256_mul_pd(x4, _mm256_broadcast_sd(rp + 2)));
+    run.xr[0] = _mm256_add_pd(run.xr[0], _mm256_mul_pd(x4, rp[0]));
+    run.xr[1] = _mm256_add_pd(run.xr[1], _mm256_mul_pd(x4, rp[1]));
+    run.xr[2] = _mm256_add_pd(run.xr[2], _mm256_mul_pd(x4, rp[2]));
     for (int k = 0; k < foreign; ++k) {
       const Slot s = fs[k];
       // The thrown-away box past the last chunk takes any rotation: the vertex's own.
@@ -631,7 +636,9 @@ template <typename Slot>
   for (const auto& [v, fc] : ch.foreign.extra()) {
     const __m128 xv = loadPoint(reinterpret_cast<const float*>(base + std::size_t{v} * stride));
     growPacked(bb[fc], xv, xv);
-    const __m256d yf = restOffset(rc[region_of[fc]].v, _mm256_cvtps_pd(xv), rest_at[v].data());
+    __m256d rp[3];
+    broadcastRest(rest + 3 * std::size_t{v}, rp);
+    const __m256d yf = restOffset(rc[region_of[fc]].v, _mm256_cvtps_pd(xv), rp);
     yb[fc].v[0] = _mm256_min_pd(yb[fc].v[0], yf);
     yb[fc].v[1] = _mm256_max_pd(yb[fc].v[1], yf);
   }
@@ -891,7 +898,9 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
   // and range check included, and keep the own-vertex boxes; the other passes grow boxes from
   // empty and leave that to the loop after them.
 #if defined(PSC_HAVE_AVX2_PATH)
-  const bool packed_rest = rest_fit && is_float && !paths && prev != nullptr && useAvx2Probes();
+  // (A rest shape kept in double, positions switched to single precision since: the generic pass.)
+  const bool packed_rest =
+      rest_fit && is_float && !paths && prev != nullptr && b.rest.single() != nullptr && useAvx2Probes();
 #else
   const bool packed_rest = false;
 #endif
@@ -911,7 +920,7 @@ void refitBounds(Body& b, Measure how, bool swept, bool rest_fit, bool paths) {
     RestFit& f = *b.rest_fit;
     packed_finite = bySlotType(ch.foreign.slotWidth(), [&](auto slot) {
       return streamBoxesFloatRestFit<decltype(slot)>(ch, base, stride, prev, prev_stride, b.chunk_box, b.chunk_own, cf,
-                                                     f, b.rest);
+                                                     f, b.rest.single());
     });
   } else
 #endif
@@ -1290,9 +1299,9 @@ inline double nearestBand(double best2) { return std::sqrt(best2 * (kNearestBand
 /// triangle (which is at most that corner's).
 bool excludedSelfPair(const PairContext& ctx, Index v, const Triangle& tri) {
   if (tri[0] == v || tri[1] == v || tri[2] == v) return true;
-  const std::vector<Vec3>& rest = ctx.tb.rest;
-  const Vec3& p = rest[v];
-  const Vec3 &a = rest[tri[0]], &b = rest[tri[1]], &c = rest[tri[2]];
+  const RestShape& rest = ctx.tb.rest;
+  const Vec3 p = rest[v];
+  const Vec3 a = rest[tri[0]], b = rest[tri[1]], c = rest[tri[2]];
   const double e2 = ctx.self_exclude2;
   if ((a - p).squaredNorm() < e2 || (b - p).squaredNorm() < e2 || (c - p).squaredNorm() < e2) return true;
   return FilterDistance::of(p, a, b, c) < e2;

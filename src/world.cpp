@@ -325,12 +325,6 @@ namespace {
   throw Error(ErrorCode::InvalidSettings, s.str());
 }
 
-std::vector<Vec3> restShape(const PositionView& positions) {
-  std::vector<Vec3> rest(positions.size());
-  for (std::size_t v = 0; v < rest.size(); ++v) rest[v] = positions[static_cast<Index>(v)];
-  return rest;
-}
-
 // Validates a body description completely and builds its topology; nothing is partitioned yet.
 std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
   auto b = std::make_unique<Body>();
@@ -372,7 +366,7 @@ std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
   b->deformable = desc.deformable;
   b->parts = desc.parts;
   if (desc.self_collision) {
-    b->rest = restShape(desc.positions);
+    b->rest = detail::RestShape(desc.positions);
     b->rest_fit.reset();
     b->rest_mean_edge = edgeStats(*b->topology, desc.positions).mean;
   }
@@ -459,7 +453,7 @@ void SensorWorld::setSelfCollision(BodyId id, bool on) {
   Body& b = impl_->get(id);
   if (on) checkSelfCollisionMode(impl_->settings, b.label());
   if (on) checkFinite(b.positions, b.label());
-  b.rest = on ? restShape(b.positions) : std::vector<Vec3>{};
+  b.rest = on ? detail::RestShape(b.positions) : detail::RestShape{};
   b.rest_fit.reset();
   b.refit_ahead = false;
   b.rest_mean_edge = on ? edgeStats(b.fullTopology(), b.positions).mean : 0.0;
@@ -659,7 +653,7 @@ std::size_t SensorWorld::memoryBytes(BodyId id) const {
          b.particle_vertex.capacity() * sizeof(Index) + b.chunks.bytes() +
          (b.chunk_box.capacity() + b.region_box.capacity()) * sizeof(detail::MotionBox) +
          b.chunk_own.capacity() * sizeof(detail::OwnBox) + b.chunk_area_ref.capacity() * sizeof(double) +
-         b.rest.capacity() * sizeof(Vec3) + (b.rest_fit ? sizeof(detail::RestFit) + b.rest_fit->bytes() : 0) +
+         b.rest.bytes() + (b.rest_fit ? sizeof(detail::RestFit) + b.rest_fit->bytes() : 0) +
          impl_->nearest_seeds.bytes(id);
 }
 

@@ -224,11 +224,17 @@ TEST(ForeignChunks, RestFitPassGivesTheSameBitsWithAndWithoutAvx2) {
       std::vector<Vec3> x, q;
       records[step] = jitteredRecords(moved, 3 + step, 0.01, x, q);
     }
+    // The rest shape in single precision, as the plugin's bodies keep it (RestShape): the AVX2
+    // pass needs it so.
+    std::vector<float> rest(3 * n);
+    for (std::size_t v = 0; v < n; ++v)
+      for (int j = 0; j < 3; ++j) rest[3 * v + j] = static_cast<float>(m.vertices[v][j]);
     Body bodies[2];
     for (int avx2 = 0; avx2 < 2; ++avx2) {
       allowAvx2Probes(avx2 == 1);
       Body& b = bodies[avx2];
-      b.rest = m.vertices;
+      b.rest = RestShape(PositionView(rest.data(), n));
+      ASSERT_NE(b.rest.single(), nullptr);
       b.rest_mean_edge = 0.05;
       b.chunks = buildChunks(topo, PositionView::of(m.vertices), region_of, 2, 32);
       b.particle_vertex = {0, 1};
