@@ -206,7 +206,9 @@ TEST(ForeignChunks, RefitBoxesHoldEveryCornerOfTheOwnedTriangles) {
 // the y-boxes, the displacement boxes, the sums of the fit and so the rotations, over two steps
 // of a turned, jittered torus (the second step with the rotations fitted in the first). The chunk
 // boxes are the same; their motion is the fast pass's single-precision one, raised by up to 1e-6
-// relative and never below. Slots of one and two bytes, vertices of two regions.
+// relative and never below. Slots of one and two bytes, vertices of two regions. A rest shape kept
+// in double (RestShape: positions given in double) takes the generic pass even with AVX2, to the
+// same bits.
 TEST(ForeignChunks, RestFitPassGivesTheSameBitsWithAndWithoutAvx2) {
   if (!avx2ProbesAvailable()) GTEST_SKIP() << "no AVX2 on this processor: only the generic pass runs";
   for (const std::size_t resolution : {2000u, 20000u}) {
@@ -229,12 +231,17 @@ TEST(ForeignChunks, RestFitPassGivesTheSameBitsWithAndWithoutAvx2) {
     std::vector<float> rest(3 * n);
     for (std::size_t v = 0; v < n; ++v)
       for (int j = 0; j < 3; ++j) rest[3 * v + j] = static_cast<float>(m.vertices[v][j]);
-    Body bodies[2];
-    for (int avx2 = 0; avx2 < 2; ++avx2) {
-      allowAvx2Probes(avx2 == 1);
-      Body& b = bodies[avx2];
-      b.rest = RestShape(PositionView(rest.data(), n));
-      ASSERT_NE(b.rest.single(), nullptr);
+    // A third body keeps the same rest values in double (positions given in double when
+    // self-collision was switched on, single precision since): the generic pass, AVX2 or not.
+    std::vector<Vec3> rest_d(n);
+    for (std::size_t v = 0; v < n; ++v) rest_d[v] = Vec3(rest[3 * v], rest[3 * v + 1], rest[3 * v + 2]);
+    Body bodies[3];
+    for (int k = 0; k < 3; ++k) {
+      allowAvx2Probes(k >= 1);
+      Body& b = bodies[k];
+      b.rest = k < 2 ? RestShape(PositionView(rest.data(), n)) : RestShape(PositionView::of(rest_d));
+      ASSERT_EQ(b.rest.single() != nullptr, k < 2);
+      ASSERT_EQ(b.rest[n - 1], rest_d[n - 1]);
       b.rest_mean_edge = 0.05;
       b.chunks = buildChunks(topo, PositionView::of(m.vertices), region_of, 2, 32);
       b.particle_vertex = {0, 1};
@@ -247,7 +254,14 @@ TEST(ForeignChunks, RestFitPassGivesTheSameBitsWithAndWithoutAvx2) {
     allowAvx2Probes(true);
     const Body& wide = bodies[1];
     const Body& narrow = bodies[0];
-    ASSERT_TRUE(wide.rest_fit && narrow.rest_fit);
+    ASSERT_TRUE(wide.rest_fit && narrow.rest_fit && bodies[2].rest_fit);
+    {
+      const RestFit& d = *bodies[2].rest_fit;
+      const RestFit& g = *narrow.rest_fit;
+      EXPECT_TRUE(d.chunk_lo == g.chunk_lo && d.chunk_hi == g.chunk_hi && d.rot == g.rot &&
+                  d.region_xr == g.region_xr && d.next_rot == g.next_rot)
+          << resolution << ": a rest shape in double must give the single one's bits";
+    }
     const RestFit& a = *wide.rest_fit;
     const RestFit& g = *narrow.rest_fit;
     ASSERT_TRUE(a.filled && g.filled);
