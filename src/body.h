@@ -232,11 +232,11 @@ class RestShape {
   RestShape() = default;
   explicit RestShape(const PositionView& positions) : size_(positions.size()) {
     if (positions.scalar() == PositionView::Scalar::Float32) {
+      // The view widens each float to double exactly, so the narrowing back is exact too.
       single_.resize(3 * size_);
       for (std::size_t v = 0; v < size_; ++v) {
-        const float* p =
-            reinterpret_cast<const float*>(static_cast<const char*>(positions.data()) + v * positions.strideBytes());
-        std::copy(p, p + 3, single_.data() + 3 * v);
+        const Vec3 p = positions[v];
+        for (int j = 0; j < 3; ++j) single_[3 * v + j] = static_cast<float>(p[j]);
       }
     } else {
       double_.resize(size_);

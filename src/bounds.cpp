@@ -269,7 +269,7 @@ template <typename Slot, bool kPrev, bool kCopy>
     if (kPrev && prev_apart) __builtin_prefetch(prev + (v + 24) * prev_stride);
     Slot c;
     std::memcpy(&c, owner + sizeof(Slot) * v, sizeof c);
-    if (c == none) continue;  // on no triangle
+    if (c == none) continue;  // in no chunk (a vertex of no region)
     const float* p = reinterpret_cast<const float*>(base + v * stride);
     if (kCopy) std::memcpy(copy + 3 * v, p, 3 * sizeof(float));
     const __m128 xv = loadPoint(p);  // (x, y, z, 0)
@@ -585,7 +585,7 @@ template <typename Slot>
     if (prev_apart) __builtin_prefetch(prev + (v + 24) * prev_stride);
     Slot c;
     std::memcpy(&c, owner + sizeof(Slot) * v, sizeof c);
-    if (c == none) continue;  // on no triangle
+    if (c == none) continue;  // in no chunk (a vertex of no region)
     const float* p = reinterpret_cast<const float*>(base + v * stride);
     if (copy != nullptr) std::memcpy(copy + 3 * v, p, 3 * sizeof(float));
     const __m128 xv = loadPoint(p);  // (x, y, z, 0)
