@@ -128,9 +128,14 @@ int main(int argc, char** argv) {
   app.add_option("--frame-every", frame_every, "with --frames: every n-th step (default 1)")->check(CLI::Range(1, 1000000));
   app.add_option("--plot", plot_dir, "write PNG plots into DIR (needs gnuplot)");
   app.add_option("--warmup", warmup, "steps left out of the timing means and medians (default min(10, steps/10))");
-  app.add_flag("--self-collision", self_collision,
+  CLI::Option* self_flag = app.add_flag("--self-collision", self_collision,
                "self-collision on every body of our pipelines (Bullet's own has none), and the self truth "
                "(self_recall_strict) for every pipeline");
+  bool no_self_rest_bound = false;
+  app.add_flag("--no-self-rest-bound", no_self_rest_bound,
+               "with --self-collision: our pipelines without the rest-shape bound (psc::SensorSettings::"
+               "self_rest_bound off), its ablation: a body's chunk pairs with itself go by their boxes alone")
+      ->needs(self_flag);
   app.add_flag("--refit-in-step", refit_in_step,
                "our pipelines refit every body in the sensor step (cold) instead of right after its "
                "predictMotion (psc::bullet::SoftBodySolver, the default here)");
@@ -210,6 +215,7 @@ int main(int argc, char** argv) {
     options.run.exact = exact;
     options.run.motion_bound = motion_bound;
     options.run.self_collision = self_collision;
+    options.run.self_rest_bound = !no_self_rest_bound;
     options.run.refit_after_predict = !refit_in_step;
     options.run.runaway_fallback = runaway_fallback;
     options.run.runaway_sharing = !no_runaway_sharing;

@@ -286,6 +286,7 @@ RunResult describeRun(const Scene& scene, Pipeline pipeline, const RunOptions& o
     r.cluster_self_direct = opt.cluster_self_direct;
   }
   r.self_collision = (pipeline != Pipeline::Bullet && opt.self_collision) || r.bullet_clusters > 0;
+  r.self_rest_bound = pipeline != Pipeline::Bullet && opt.self_collision && opt.self_rest_bound;
   r.bodies = scene.bodies.size();
   r.resolution = scene.resolution();
   r.steps = opt.steps ? opt.steps : scene.default_steps;
@@ -409,6 +410,7 @@ Run::Run(const Scene& scene, Pipeline pipeline, const RunOptions& opt, bool stri
     o.motion_bound = opt.motion_bound;
     o.contacts = opt.contacts;
     o.self_collision = opt.self_collision;
+    o.self_rest_bound = opt.self_rest_bound;
     o.refit_after_predict = opt.refit_after_predict;
     o.runaway_fallback = opt.runaway_fallback;
     o.runaway_sharing = opt.runaway_sharing;

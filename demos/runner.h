@@ -77,6 +77,9 @@ struct RunOptions {
   /// Self-collision on every body of our pipelines (psc::bullet::Settings::self_collision), and the
   /// self truth for every pipeline. Bullet's own pipeline has none and stays as it is.
   bool self_collision = false;
+  /// With self_collision: psc::SensorSettings::self_rest_bound for our pipelines (--no-self-rest-bound:
+  /// false, the ablation of the rest-shape bound: the self chunk pairs go by their boxes alone).
+  bool self_rest_bound = true;
   /// Our pipelines refit each body right after its predictMotion, nodes warm (SensorPipeline);
   /// false (--refit-in-step): in the sensor step, as a plugin without the solver hook does.
   bool refit_after_predict = true;
@@ -109,6 +112,7 @@ struct RunResult {
   bool runaway_sharing = false;   ///< ours: RunOptions::runaway_sharing
   std::size_t crowded_band = 0;   ///< ours: RunOptions::crowded_band
   std::string contacts;           ///< ours: RunOptions::contacts; empty for Bullet's
+  bool self_rest_bound = false;   ///< ours with self-collision: RunOptions::self_rest_bound
   bool self_collision = false;    ///< the pipeline itself: ours with RunOptions::self_collision, Bullet's cluster runs
   int bullet_clusters = 0;        ///< RunOptions::bullet_clusters (0: not a cluster run)
   bool cluster_self_direct = false;

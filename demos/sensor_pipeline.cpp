@@ -28,6 +28,7 @@ SensorPipeline::SensorPipeline(SceneWorld& world, const Options& options) {
   settings.opt_in = psc::bullet::OptIn::Explicit;
   settings.sensors.flagging = options.flagging;
   settings.self_collision = options.self_collision;
+  settings.sensors.self_rest_bound = options.self_rest_bound;
   settings.runaway_fallback = options.runaway_fallback;
   settings.runaway_sharing = options.runaway_sharing;
   settings.crowded_band = options.crowded_band;

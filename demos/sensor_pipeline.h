@@ -48,6 +48,7 @@ class SensorPipeline {
     /// Settings::self_collision: every body against itself too (its rest shape: its positions at
     /// the plugin's first step).
     bool self_collision = false;
+    bool self_rest_bound = true;  ///< psc::SensorSettings::self_rest_bound
     /// The world's solver calls Plugin::afterPredictMotion after each body's predictMotion (what
     /// psc::bullet::SoftBodySolver does), so the sensors refit each body while its nodes are warm;
     /// false: every body is refit in the sensor step, at the first soft-soft pair.

@@ -199,8 +199,10 @@ TEST(DemoCli, SelfCollisionRunsHaveTheSelfKeys) {
     EXPECT_EQ(r.at("self_contacts_outside_truth").get<long>(), 0) << pipeline;
     if (pipeline == "bullet") {
       EXPECT_EQ(r.at("self_contacts_found").get<long>(), 0);
+      EXPECT_FALSE(r.contains("self_rest_bound"));
     } else {
       EXPECT_EQ(num(r, "self_recall_strict"), 1.0);
+      EXPECT_TRUE(r.at("self_rest_bound").get<bool>());
     }
   }
   std::ifstream csv(dir / "r.csv");
@@ -211,6 +213,21 @@ TEST(DemoCli, SelfCollisionRunsHaveTheSelfKeys) {
   EXPECT_NE(header.find(",self_recall_strict_all,"), std::string::npos) << header;
   // The table shows the crossing counts and the self recall too.
   EXPECT_NE(o.output.find(" cross self-x self rec "), std::string::npos) << o.output;
+}
+
+TEST(DemoCli, TheSelfRestBoundsAblationNeedsSelfCollisionAndIsInTheJson) {
+  const Outcome alone = run("--scene head_on --resolution 300 --steps 2 --no-self-rest-bound");
+  EXPECT_TRUE(alone.exited);
+  EXPECT_NE(alone.code, 0) << alone.output;
+  EXPECT_NE(alone.output.find("--no-self-rest-bound requires --self-collision"), std::string::npos) << alone.output;
+  EXPECT_EQ(alone.output.find("head_on (scene"), std::string::npos) << "nothing ran: " << alone.output;
+  const fs::path dir = scratch("self_rest_bound");
+  const Outcome o = run("--scene head_on --resolution 300 --steps 20 --pipeline sensors --truth none "
+                        "--self-collision --no-self-rest-bound --json " + (dir / "r.json").string());
+  ASSERT_TRUE(o.exited && o.code == 0) << o.output;
+  const nlohmann::json report = readJson(dir / "r.json");
+  ASSERT_EQ(report.at("runs").size(), 1u);
+  EXPECT_FALSE(report.at("runs")[0].at("self_rest_bound").get<bool>());
 }
 
 TEST(DemoCli, SelfRecallOverAllPairsSeesTheTrianglesBulletRefuses) {
