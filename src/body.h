@@ -139,6 +139,10 @@ struct ChunkLists {
   /// and so a chunk.)
   PackedIndices owner;
   ForeignChunks foreign;            ///< per vertex, the other chunks whose owned triangles it is in
+  /// The vertices with a chunk that are on no triangle, ascending (a volumetric body's inner
+  /// nodes): the self motion term's mean displacement leaves them out (psc::selfMotion). Empty
+  /// for a surface mesh.
+  std::vector<Index> loose;
 
   std::size_t count() const { return table_begin.size() - 1; }
   std::size_t vertexCount() const { return owner.size(); }
@@ -186,7 +190,7 @@ struct ChunkLists {
   std::vector<Index> regionOfVertices() const;
   std::size_t bytes() const {
     return (table.capacity() + table_begin.capacity() + own_end.capacity() + triangle_begin.capacity() +
-            triangle_base.capacity() + region_begin.capacity() + region_of.capacity()) *
+            triangle_base.capacity() + region_begin.capacity() + region_of.capacity() + loose.capacity()) *
                sizeof(Index) +
            owner.bytes() + triangle_offset.bytes() + corners.bytes() + foreign.bytes();
   }
@@ -298,6 +302,11 @@ struct RestFit {
   std::vector<Vec3> move_lo, move_hi;        ///< per chunk, the box of its own vertices' displacements
   Vec3 mean_motion = Vec3::Zero();
   std::vector<double> chunk_self_motion;     ///< largest selfMotion of a chunk's own vertices (bound)
+  /// What y = x − R·rest's rounding can move a deviation by: y is made at the magnitude of the
+  /// positions and the rest shape (a few units in the last place of each), far above the deviations
+  /// when a body lies far from the origin. Every rest-shape test leaves this much more room.
+  double rounding = 0.0;
+  double rest_magnitude = 0.0;               ///< set-up: the largest |rest| of any vertex (bound)
   std::vector<double> region_self_motion;    ///< the same over a region's chunks
   std::size_t bytes() const {
     const std::size_t regions = region_count.capacity(), chunks = chunk_rest_radius.capacity();

@@ -691,6 +691,8 @@ void startRestFit(Body& b) {
       if (f.region_count[r] > 0.0) f.region_rest_mean[r] /= f.region_count[r];
       f.region_rest_center[r] = 0.5 * (rlo + rhi);
       f.region_rest_radius[r] = 0.5 * (rhi - rlo).norm();
+      if (rlo.x() <= rhi.x())
+        f.rest_magnitude = std::max(f.rest_magnitude, rlo.cwiseAbs().cwiseMax(rhi.cwiseAbs()).norm());
     }
     f.next_rot.assign(regions, Eigen::Matrix3d::Identity());
   }
@@ -769,7 +771,21 @@ void finishRestFit(Body& b) {
   }
   // The self motion term: every own vertex's displacement d lies in its chunk's box, so
   // selfMotion(d, mean) ≤ min(the chunk's largest |d|, the farthest corner of the box from mean).
+  // The mean is over the vertices on triangles (psc::selfMotion): the pass summed every own vertex,
+  // so the loose ones (a volumetric body's inner nodes) come off again, with the displacement the
+  // pass took (x − q in double: exact for floats, and the same operation for doubles).
+  if (f.moved > 0.0)
+    for (const Index v : ch.loose) {
+      f.sum_motion -= b.positions[v] - b.previous[v];
+      f.moved -= 1.0;
+    }
   f.mean_motion = f.moved > 0.0 ? Vec3(f.sum_motion / f.moved) : Vec3::Zero();
+  // y = x − R·rest: R·rest rounds at |rest|, the difference at |x| too, and a deviation is the
+  // difference of two such values (2^-52 each, with room to spare).
+  const double x_magnitude = (b.body_box.lo.array() <= b.body_box.hi.array()).all()
+                                 ? b.body_box.lo.cwiseAbs().cwiseMax(b.body_box.hi.cwiseAbs()).norm()
+                                 : 0.0;
+  f.rounding = 1e-14 * (x_magnitude + f.rest_magnitude);
   f.chunk_self_motion.resize(chunks);
   f.region_self_motion.assign(regions, 0.0);
   for (Index c = 0; c < chunks; ++c) {
@@ -1090,6 +1106,10 @@ struct ChunkRef {
   // What the chunk pairs of one region pair read, gathered once per region pair on first use:
   int vertices_at = -1;   ///< offset of this chunk's vertex records in Scratch::verts
   int triangles_at = -1;  ///< offset of its triangle records in Scratch::tri_lanes
+  /// Self pairs: the rest position its triangles' rest centroids are taken from (that of the first
+  /// vertex of its table), so that they and the vertices' rest positions are compared as small
+  /// differences, not at the coordinates' magnitude.
+  Vec3 rest_origin = Vec3::Zero();
 };
 
 struct VertexRec {
@@ -1124,7 +1144,7 @@ double reachOf(const Vec3& x, double r) {
 struct TriangleRec {
   Vec3 lo, hi;
   double nlo, nhi;  ///< extent along the sensor axis
-  Vec3 rest_mid = Vec3::Zero();  ///< self pairs: the triangle's centroid in the rest shape
+  Vec3 rest_mid = Vec3::Zero();  ///< self pairs: the triangle's centroid in the rest shape, from ChunkRef::rest_origin
 };
 
 /// The rest, read only for the pairs whose boxes meet (parallel to Scratch::tri_lanes).
@@ -1368,6 +1388,7 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
   // instead of 192. With Swept, Ahead or meeting pairs, the other end of each corner's path beside it.
   const Index* table = ch.table.data() + ch.table_begin[c.chunk];
   const std::size_t n_table = ch.table_begin[c.chunk + 1] - ch.table_begin[c.chunk];
+  if (ctx.self_exclude2 >= 0.0 && n_table > 0) c.rest_origin = ctx.tb.rest[table[0]];
   std::vector<Vec3>& at_now = ctx.s.table_now;
   std::vector<Vec3>& at_other = ctx.s.table_other;
   at_now.resize(n_table);
@@ -1388,7 +1409,11 @@ void gatherTriangles(const PairContext& ctx, ChunkRef& c) {
     const Index la = ch.corners[3 * at], lb = ch.corners[3 * at + 1], lc = ch.corners[3 * at + 2];
     const Vec3 &a = at_now[la], &b = at_now[lb], &cc = at_now[lc];
     TriangleRec rec{a.cwiseMin(b).cwiseMin(cc), a.cwiseMax(b).cwiseMax(cc), 0.0, 0.0};
-    if (ctx.self_exclude2 >= 0.0) rec.rest_mid = (ctx.tb.rest[table[la]] + ctx.tb.rest[table[lb]] + ctx.tb.rest[table[lc]]) / 3.0;
+    if (ctx.self_exclude2 >= 0.0) {
+      // From the chunk's origin: exact differences for a rest shape in single precision.
+      const Vec3& o = c.rest_origin;
+      rec.rest_mid = ((ctx.tb.rest[table[la]] - o) + (ctx.tb.rest[table[lb]] - o) + (ctx.tb.rest[table[lc]] - o)) / 3.0;
+    }
     if (ctx.axis.valid) {
       const double pa = ctx.axis.project(a), pb = ctx.axis.project(b), pc = ctx.axis.project(cc);
       rec.nlo = std::min(pa, std::min(pb, pc));
@@ -1860,8 +1885,8 @@ void narrowToPicks(const VertexLanes& lanes, std::size_t at, const Index* picked
   }
 }
 
-bool restClears(double exclusion, double deviation, double reach);
-bool restClearsSquared(double exclusion, double deviation2, double reach);
+bool restClears(double exclusion, double deviation, double reach, double rounding);
+bool restClearsSquared(double exclusion, double deviation2, double reach, double rounding);
 
 /// [beyond] The rest-shape bound for each picked vertex of a self pair, against the triangle chunk
 /// ct of its own body. With R the rotation of ct's region and y = x − R·rest, every corner c of
@@ -1884,14 +1909,14 @@ std::size_t dropUnbentPicks(const PairContext& ctx, Index ct, const VertexRec* r
   // centre): when that alone leaves no room within the smallest reach, no pick can leave.
   double least_reach2 = std::numeric_limits<double>::infinity();
   for (std::size_t k = 0; k < n_picked; ++k) least_reach2 = std::min(least_reach2, recs[picked[k]].reach2);
-  if (!restClearsSquared(exclusion, 0.25 * (hi - lo).squaredNorm(), std::sqrt(least_reach2))) return n_picked;
+  if (!restClearsSquared(exclusion, 0.25 * (hi - lo).squaredNorm(), std::sqrt(least_reach2), f.rounding)) return n_picked;
   std::size_t n = 0;
   for (std::size_t k = 0; k < n_picked; ++k) {
     const VertexRec& vr = recs[picked[k]];
     const Vec3 y = vr.x - rot * ctx.tb.rest[vr.v];
     const double deviation2 = (lo - y).cwiseAbs().cwiseMax((hi - y).cwiseAbs()).squaredNorm();
     picked[n] = picked[k];
-    n += static_cast<std::size_t>(!restClearsSquared(exclusion, deviation2, std::sqrt(vr.reach2)));
+    n += static_cast<std::size_t>(!restClearsSquared(exclusion, deviation2, std::sqrt(vr.reach2), f.rounding));
   }
   ctx.counters.self_vertices_unbent += n_picked - n;
   return n;
@@ -1965,6 +1990,10 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
 #endif
     if (s.hits.size() < nt + 3) s.hits.resize(nt + 3);  // collectMeetsAvx2 writes four slots at a time
   }
+  // Self pairs: a triangle whose rest centroid lies within the exclusion distance of the vertex at
+  // rest is excluded by the rule, and leaves the probes first; a relative 1e-9 below the rule's
+  // square keeps the pairs at its edge for the rule itself (excludedSelfPair) to decide.
+  const double prefilter2 = ctx.self_exclude2 * (1.0 - 1e-9);
   for (std::size_t pick = 0; pick < n_picked; ++pick) {
     const VertexRec& vr = recs[s.picked[pick]];
     const KeptTriangles& kept = s.kept;
@@ -1996,11 +2025,13 @@ void chunkCandidates(const PairContext& ctx, ChunkRef& cv, ChunkRef& ct) {
     std::size_t n_hits = 0;
 #if defined(PSC_HAVE_AVX2_PATH)
     if (self && avx2)
-      n_hits = collectSelfMeetsAvx2(kept, padded, pr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, hits);
+      n_hits = collectSelfMeetsAvx2(kept, padded, pr, n_lo, n_hi, Vec3(ctx.tb.rest[vr.v] - ct.rest_origin),
+                                    prefilter2, hits);
     else
 #endif
     if (self)
-      n_hits = collectMeets<true>(kept, pr, n_lo, n_hi, ctx.tb.rest[vr.v], ctx.self_exclude2, s.kept.meets.data(), hits);
+      n_hits = collectMeets<true>(kept, pr, n_lo, n_hi, Vec3(ctx.tb.rest[vr.v] - ct.rest_origin), prefilter2,
+                                  s.kept.meets.data(), hits);
 #if defined(PSC_HAVE_AVX2_PATH)
     else if (avx2)
       n_hits = collectMeetsAvx2(kept, padded, pr, n_lo, n_hi, hits);
@@ -2051,14 +2082,15 @@ double restDeviation(const RestFit& f, Index ra, const Vec3& ka, double ha, Inde
 
 /// The bound clears `reach` (the largest reach of the vertices on either side). It is computed in
 /// double from the same positions the distances are: a relative 1e-9 keeps its own rounding on
-/// the safe side.
-bool restClears(double exclusion, double deviation, double reach) {
-  return exclusion - deviation >= reach * (1.0 + 1e-9);
+/// the safe side, and `rounding` (RestFit::rounding) that of y = x − R·rest, which is made at the
+/// coordinates' magnitude (a body far from the origin) while the deviations are small.
+bool restClears(double exclusion, double deviation, double reach, double rounding) {
+  return exclusion - deviation >= reach * (1.0 + 1e-9) + rounding;
 }
 
 /// restClears of a squared deviation, without its square root.
-bool restClearsSquared(double exclusion, double deviation2, double reach) {
-  const double room = exclusion - reach * (1.0 + 1e-9);
+bool restClearsSquared(double exclusion, double deviation2, double reach, double rounding) {
+  const double room = exclusion - reach * (1.0 + 1e-9) - rounding;
   return room >= 0.0 && deviation2 <= room * room;
 }
 
@@ -2069,18 +2101,18 @@ bool restApartChunks(const Body& X, Index a, Index b, double exclusion, double r
   const RestFit& f = *X.rest_fit;
   // No translation does better than the two half diagonals (each box's farthest corner is nearest
   // from its centre): most pairs of a body bent as a whole end here.
-  if (!restClears(exclusion, f.chunk_half[a] + f.chunk_half[b], reach)) return false;
+  if (!restClears(exclusion, f.chunk_half[a] + f.chunk_half[b], reach, f.rounding)) return false;
   const std::vector<Index>& region_of = X.chunks.region_of;
   double deviation = restDeviation(f, region_of[a], f.chunk_center[a], f.chunk_half[a], region_of[b],
                                    f.chunk_center[b], f.chunk_half[b], f.chunk_rest_center[b], f.chunk_rest_radius[b]);
-  if (region_of[a] == region_of[b] && !restClears(exclusion, deviation, reach)) {
+  if (region_of[a] == region_of[b] && !restClears(exclusion, deviation, reach, f.rounding)) {
     const auto farthest = [&](Index c, const Vec3& k) {
       return (f.chunk_lo[c] - k).cwiseAbs().cwiseMax((f.chunk_hi[c] - k).cwiseAbs()).norm();
     };
     for (const Vec3& k : {f.chunk_center[a], f.chunk_center[b], Vec3(0.5 * (f.chunk_center[a] + f.chunk_center[b]))})
       deviation = std::min(deviation, farthest(a, k) + farthest(b, k));
   }
-  return restClears(exclusion, deviation, reach);
+  return restClears(exclusion, deviation, reach, f.rounding);
 }
 
 /// No pair between regions i and j of X (both directions) can be a candidate.
@@ -2089,7 +2121,7 @@ bool restApartRegions(const Body& X, Index i, Index j, double exclusion, double 
   return restClears(exclusion,
                     restDeviation(f, i, f.region_center[i], f.region_half[i], j, f.region_center[j], f.region_half[j],
                                   f.region_rest_center[j], f.region_rest_radius[j]),
-                    reach);
+                    reach, f.rounding);
 }
 
 struct Group {

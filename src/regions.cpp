@@ -115,13 +115,19 @@ ChunkLists buildChunks(const MeshTopology& topology, const PositionView& positio
     out.region_begin.push_back(chunk);
     out.region_of.resize(chunk, static_cast<Index>(r));
   }
+  std::vector<char> on_triangle(topology.vertexCount(), 0);
   for (Index t = 0; t < topology.triangleCount(); ++t) {
     const Triangle& tri = topology.triangle(t);
     const Index owner = chunk_of[*std::min_element(tri.begin(), tri.end())];
     tpairs.emplace_back(owner, t);
-    for (Index v : tri)
+    for (Index v : tri) {
+      on_triangle[v] = 1;
       if (chunk_of[v] != owner) bpairs.emplace_back(v, owner);
+    }
   }
+  for (Index v = 0; v < topology.vertexCount(); ++v)
+    if (chunk_of[v] != kInvalidIndex && !on_triangle[v]) out.loose.push_back(v);
+  out.loose.shrink_to_fit();
   out.owner = PackedIndices(topology.vertexCount(), chunk);
   for (Index v = 0; v < topology.vertexCount(); ++v) out.owner.set(v, chunk_of[v] == kInvalidIndex ? chunk : chunk_of[v]);
   out.foreign = ForeignChunks(topology.vertexCount(), chunk, bpairs);

@@ -15,6 +15,7 @@
 #include <Eigen/Geometry>
 
 #include <cmath>
+#include <random>
 #include <set>
 #include <string>
 #include <tuple>
@@ -224,6 +225,142 @@ TEST(SelfCollision, ABodyMeetsItselfByItsMotionAgainstItselfNotByItsSpeed) {
       EXPECT_TRUE(got.empty()) << got.size() << " pairs of a body moving as a whole";
     }
   }
+}
+
+TEST(SelfCollision, TheMeanMotionLeavesOutTheVerticesOnNoTriangle) {
+  // psc::selfMotion's mean is over the vertices on triangles. A volumetric body's inner nodes (here
+  // 94 vertices on no triangle) have chunks and are candidate vertices, but the mean leaves them
+  // out: when they move with a vertex that comes down onto a triangle of its own body, the pair is
+  // a candidate at the reach the rule gives (the brute force's pairs, exactly), not at the smaller
+  // one an all-vertex mean would give (found by a review: the refit's pass summed every vertex).
+  TriMesh body;
+  body.vertices = {{-1, -1, 0}, {3, -1, 0}, {-1, 3, 0}, {0, 0, 0.3}, {0.5, 0, 0.3}, {0, 0.5, 0.3}};
+  body.triangles = {{0, 1, 2}, {3, 4, 5}};
+  for (int i = 0; i < 94; ++i) body.vertices.push_back(Vec3(10.0 + 0.1 * i, 10.0, 0.0));
+  const std::vector<Vec3> rest = body.vertices;
+  SensorSettings settings;
+  settings.self_radius_edges = 0.01;  // R = 2 × margin = 0.1, E = 0.2
+  for (const bool rest_bound : {true, false}) {
+    settings.self_rest_bound = rest_bound;
+    SensorWorld w(settings);
+    const BodyId id = w.addBody(selfColliding(body, 0.05));
+    w.step();
+    const double radius = w.selfRadius(id), mf = w.settings().motion_factor;
+    ASSERT_DOUBLE_EQ(radius, 0.1);
+    // The vertex above the lower triangle and every vertex on no triangle come down by 0.15.
+    std::vector<Vec3> now = rest;
+    const Vec3 down(0.0, 0.0, -0.15);
+    now[3] += down;
+    for (std::size_t v = 6; v < now.size(); ++v) now[v] += down;
+    w.setPositions(id, PositionView::of(now), PositionView::of(rest));
+    std::size_t dup = 0;
+    const std::set<std::pair<Index, Index>> got = selfCandidates(w.step(), id, dup);
+    EXPECT_EQ(dup, 0u);
+    Vec3 mean = Vec3::Zero();
+    for (Index v = 0; v < 6; ++v) mean += now[v] - rest[v];
+    mean /= 6.0;
+    std::set<std::pair<Index, Index>> expected;
+    forEachPairBeyondTheRule(body, rest, now, w.settings().self_rest_exclusion * radius,
+                             [&](Index v, Index t, double dist) {
+      if (dist < radius + mf * selfMotion(now[v] - rest[v], mean)) expected.insert({v, t});
+    });
+    EXPECT_EQ(expected, (std::set<std::pair<Index, Index>>{{3, 0}})) << "0.15 from the triangle, reach 0.35";
+    EXPECT_EQ(got, expected) << "rest-shape bound " << rest_bound;
+  }
+}
+
+/// The distance from p to the plane of (a, b, c) in long double, from differences (p projects
+/// inside the triangle in the test below, so it is the point–triangle distance).
+long double planeDistance(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
+  long double ab[3], ac[3], ap[3];
+  for (int i = 0; i < 3; ++i) {
+    ab[i] = static_cast<long double>(b[i]) - a[i];
+    ac[i] = static_cast<long double>(c[i]) - a[i];
+    ap[i] = static_cast<long double>(p[i]) - a[i];
+  }
+  const long double n[3] = {ab[1] * ac[2] - ab[2] * ac[1], ab[2] * ac[0] - ab[0] * ac[2], ab[0] * ac[1] - ab[1] * ac[0]};
+  return std::fabs((n[0] * ap[0] + n[1] * ap[1] + n[2] * ap[2]) / std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]));
+}
+
+TEST(SelfCollision, FarFromTheOriginNoPairAtTheEdgesOfTheRuleIsLost) {
+  // A vertex just inside R of a triangle of its own body now, just beyond E of it at rest: a
+  // candidate, however far from the origin the body lies. Two roundings at the coordinates'
+  // magnitude dropped such pairs (found by a review): the triangles' rest centroids of the
+  // exclusion pre-filter, summed at full magnitude (now taken from the chunk's first vertex), and
+  // y = x − R·rest of the rest-shape bound, made at the magnitude of x and rest while the room it
+  // is compared with is small (now RestFit::rounding more room).
+  const double margin = 1.0 / 128, radius = 2.0 * margin, exclusion = 2.0 * radius;  // R = 2^-6
+  const std::vector<Triangle> triangles = {{0, 1, 2}, {3, 4, 5}, {3, 5, 6}, {3, 6, 4}};
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const auto randomTurn = [&]() {
+    Eigen::Quaterniond q(u(rng), u(rng), u(rng), u(rng));
+    q.normalize();
+    return q;
+  };
+  for (const bool rest_bound : {true, false}) {
+    std::size_t promised = 0, lost = 0;
+    for (int trial = 0; trial < 400; ++trial) {
+      // A triangle and, above its middle, a vertex with a fan of three triangles: just beyond E at
+      // rest, and just inside R now; each placed by its own rotation and a translation of about 1e6.
+      const double above = exclusion * (1.0 + 1e-12);
+      std::vector<Vec3> shape = {{0.1, 0, 0},  {-0.05, 0.0866, 0},   {-0.05, -0.0866, 0}, {0, 0, above},
+                                 {0.02, 0, above}, {-0.01, 0.0173, above}, {-0.01, -0.0173, above}};
+      const Eigen::Quaterniond q_rest = randomTurn(), q_now = randomTurn();
+      const Vec3 k_rest(1e6 * (1 + 0.1 * u(rng)), 1e6 * u(rng), 1e6 * u(rng));
+      const Vec3 k_now(1e6 * u(rng), 1e6 * (1 + 0.1 * u(rng)), 1e6 * u(rng));
+      std::vector<Vec3> rest(shape.size()), now(shape.size());
+      for (std::size_t i = 0; i < shape.size(); ++i) rest[i] = q_rest * shape[i] + k_rest;
+      shape[3].z() = radius * (1.0 - 1e-12);
+      for (std::size_t i = 0; i < shape.size(); ++i) now[i] = q_now * shape[i] + k_now;
+      // Promised after the inputs' own rounding: inside R now, beyond E at rest.
+      if (!(planeDistance(now[3], now[0], now[1], now[2]) < radius) ||
+          !(planeDistance(rest[3], rest[0], rest[1], rest[2]) >= exclusion))
+        continue;
+      ++promised;
+      SensorSettings settings;
+      settings.self_radius_edges = 0.01;
+      settings.chunk_vertices = 4;
+      settings.self_rest_bound = rest_bound;
+      SensorWorld w(settings);
+      std::vector<Vec3> positions = rest;
+      BodyDesc d;
+      d.triangles = triangles;
+      d.positions = PositionView::of(positions);
+      d.margin = margin;
+      d.self_collision = true;
+      const BodyId id = w.addBody(d);
+      w.step();
+      positions = now;
+      w.setPositions(id, PositionView::of(positions));
+      std::size_t dup = 0;
+      lost += selfCandidates(w.step(), id, dup).count({3, 0}) == 0;
+    }
+    EXPECT_GT(promised, 50u);
+    EXPECT_EQ(lost, 0u) << "of " << promised << " promised pairs, rest-shape bound " << rest_bound;
+  }
+  // Translated far along z only (the rotation stays exactly the identity), the vertex pushed to
+  // just inside R: the rest-shape bound's room alone decided.
+  const double translation = std::ldexp(1.0, 19) + 0.5, grid = std::ldexp(1.0, -32);
+  const double gap = std::floor(0.01 / grid) * grid, r = gap + 2e-11;
+  const double height = 2.0 * r + 1e-12, upper = std::ceil(4.0 * r / grid) * grid;
+  std::vector<Vec3> positions = {{0.13, 0.02, 0},          {-0.02, 0.1066, 0},      {-0.02, -0.0666, 0}, {0, 0, height},
+                                 {-0.01, -0.02, upper}, {-0.04, -0.0027, upper}, {-0.04, -0.0373, upper}};
+  SensorSettings settings;
+  settings.self_radius_edges = 0.0;
+  SensorWorld w(settings);
+  BodyDesc d;
+  d.triangles = triangles;
+  d.positions = PositionView::of(positions);
+  d.margin = r / 2;
+  d.self_collision = true;
+  const BodyId id = w.addBody(d);
+  w.step();
+  for (Vec3& p : positions) p.z() += translation;
+  positions[3] = Vec3(0, 0, translation + gap);
+  w.setPositions(id, PositionView::of(positions));
+  std::size_t dup = 0;
+  EXPECT_EQ(selfCandidates(w.step(), id, dup).count({3, 0}), 1u) << gap << " from the triangle, R " << w.selfRadius(id);
 }
 
 TEST(SelfCollision, NoSelfCandidateLiesBeyondTheSelfRadiusNotEvenByARoundingSlack) {
