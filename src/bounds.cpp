@@ -47,8 +47,15 @@ struct Grown {
   double g;
 };
 
+/// factor × motion, 0 for a factor of 0 whatever the motion: the packed refit squares motions in
+/// single precision, and a displacement above about 1.8e19 in one step (finite positions go up
+/// to kMaxCoordinate) leaves a chunk's motion infinite, where 0 × inf would make every growth and
+/// test after it NaN and drop the body's pairs (a review's finding: motion_factor 0, float positions).
+/// With a positive factor an infinite growth holds everything: slower, never wrong.
+double motionTerm(double factor, double motion) { return factor == 0.0 ? 0.0 : factor * motion; }
+
 Grown grown(const MotionBox& b, double margin, double motion_factor) {
-  const double g = margin + motion_factor * b.motion;
+  const double g = margin + motionTerm(motion_factor, b.motion);
   return {b.lo.array() - g, b.hi.array() + g, g};
 }
 
@@ -2276,7 +2283,7 @@ class Collector {
     const auto t0 = std::chrono::steady_clock::now();
     // The largest reach of the vertices in box b (reachOf of the largest radius and coordinate).
     const auto reachIn = [&](const MotionBox& b) {
-      return (radius + mf * b.motion) * (1.0 + 1e-5) + 1e-6 * std::max(b.lo.cwiseAbs().maxCoeff(), b.hi.cwiseAbs().maxCoeff());
+      return (radius + motionTerm(mf, b.motion)) * (1.0 + 1e-5) + 1e-6 * std::max(b.lo.cwiseAbs().maxCoeff(), b.hi.cwiseAbs().maxCoeff());
     };
     for (const auto& [ri, rj] : region_pairs_) {
       ++counters_.self_region_pairs;
@@ -2537,7 +2544,7 @@ class Collector {
       // vertex (the table below reads each, from Bullet's nodes a cache miss apiece on a large
       // body). Rounding is monotonic, so it also holds the table's rounded balls.
       const OwnBox& own = V.chunk_own[cv];
-      const double m = factor * V.chunk_box[cv].motion;
+      const double m = motionTerm(factor, V.chunk_box[cv].motion);
       lo = Vec3(double(own.lo[0]) - m, double(own.lo[1]) - m, double(own.lo[2]) - m);
       hi = Vec3(double(own.hi[0]) + m, double(own.hi[1]) + m, double(own.hi[2]) + m);
     } else {

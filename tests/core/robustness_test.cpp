@@ -229,6 +229,52 @@ TEST(SinglePrecision, PackedRefitFindsWhatDoublePositionsFindAndNamesBadValues) 
   }
 }
 
+TEST(SinglePrecision, AJumpBeyondFloatsSquareLosesNoPairWithoutAMotionTerm) {
+  // The packed refit squares motions in single precision: a vertex that jumped 2e19 or 1e20 in
+  // one step (its coordinates still within kMaxCoordinate) leaves its chunk's motion infinite.
+  // With motion_factor 0 the growth is the margins alone; 0 × inf made it NaN and dropped the
+  // whole body pair (a review's finding). Two spheres 0.01 apart, margins 0.05: the same
+  // candidates as for the same values in double.
+  for (const double jump : {0.0, 2e19, 1e20}) {
+    TriMesh a = makeSphere(1.0, 200), b = makeSphere(1.0, 200);
+    b.translate(Vec3(2.01, 0, 0));
+    std::vector<float> fa, fb, qa;
+    for (const Vec3& p : a.vertices)
+      for (int k = 0; k < 3; ++k) fa.push_back(static_cast<float>(p[k]));
+    for (const Vec3& p : b.vertices)
+      for (int k = 0; k < 3; ++k) fb.push_back(static_cast<float>(p[k]));
+    qa = fa;
+    qa[0] -= static_cast<float>(jump);  // vertex 0 of A, on its far side
+    std::vector<Vec3> da, pa, db;
+    for (std::size_t i = 0; i < a.vertices.size(); ++i) {
+      da.emplace_back(fa[3 * i], fa[3 * i + 1], fa[3 * i + 2]);
+      pa.emplace_back(qa[3 * i], qa[3 * i + 1], qa[3 * i + 2]);
+    }
+    for (std::size_t i = 0; i < b.vertices.size(); ++i) db.emplace_back(fb[3 * i], fb[3 * i + 1], fb[3 * i + 2]);
+    SensorSettings settings;
+    settings.motion_factor = 0.0;
+    SensorWorld singles(settings), doubles(settings);
+    BodyDesc A, B;
+    A.triangles = a.triangles;
+    B.triangles = b.triangles;
+    A.margin = B.margin = 0.05;
+    A.positions = PositionView(fa.data(), a.vertices.size());
+    A.previous = PositionView(qa.data(), a.vertices.size());
+    B.positions = PositionView(fb.data(), b.vertices.size());
+    B.previous = B.positions;
+    singles.addBody(A);
+    singles.addBody(B);
+    A.positions = PositionView::of(da);
+    A.previous = PositionView::of(pa);
+    B.positions = B.previous = PositionView::of(db);
+    doubles.addBody(A);
+    doubles.addBody(B);
+    const std::vector<CandidatePair> want = doubles.step().candidates;
+    EXPECT_GT(want.size(), 10u) << "jump " << jump;
+    EXPECT_EQ(singles.step().candidates, want) << "jump " << jump;
+  }
+}
+
 TEST(BadMesh, CoordinatesBeyondTheLimitAreRejected) {
   Body b = bodyOf(makeSphere(1.0, 100), "ball");
   b.mesh.vertices[3].x() = 1e200;  // finite, but its square overflows
