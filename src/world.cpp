@@ -466,6 +466,11 @@ double SensorWorld::selfRadius(BodyId id) const {
   return b.selfCollides() ? selfContactRadius(b.margin, b.rest_mean_edge, impl_->settings.self_radius_edges) : 0.0;
 }
 
+Vec3 SensorWorld::selfMeanMotion(BodyId id) const {
+  const Body& b = impl_->get(id);
+  return b.selfCollides() && b.rest_fit && b.rest_fit->filled ? b.rest_fit->mean_motion : Vec3::Zero();
+}
+
 double selfContactRadius(double margin, double rest_mean_edge, double self_radius_edges) {
   return std::max(2.0 * margin, self_radius_edges * rest_mean_edge);
 }

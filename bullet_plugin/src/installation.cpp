@@ -347,8 +347,23 @@ void Installation::collideSelfPairs() {
     if (body == nullptr || range.first == range.second) continue;
     const auto start = std::chrono::steady_clock::now();
     const auto radius = static_cast<btScalar>(sensors_.selfRadius(id));
+    const int before = body->m_scontacts.size();
     const ExactCounts counts =
         collideCandidates(settings_.exact, *body, *body, radius, range.first, range.second, settings_.contacts);
+    // Bullet's test accepts at the margins + 2·|m_x − m_q| and makes that the contact's margin, the
+    // distance the solver pushes the node out to: a body moving fast as a whole would push its own
+    // layers apart by its speed. A self contact's margin is the self rule's radius instead,
+    // selfRadius + motion_factor × selfMotion (the node's motion against its body's), within which
+    // the core took the pair. (Continuous has no motion term: its margins are the radius already.)
+    const psc::Vec3 mean = sensors_.selfMeanMotion(id);
+    const double factor = sensors_.settings().motion_factor;
+    for (int i = before; i < body->m_scontacts.size(); ++i) {
+      btSoftBody::SContact& c = body->m_scontacts[i];
+      const btVector3 d = c.m_node->m_x - c.m_node->m_q;
+      const psc::Vec3 dv(double(d.x()), double(d.y()), double(d.z()));
+      const double rule = double(radius) + factor * psc::selfMotion(dv, mean);
+      if (double(c.m_margin) > rule) c.m_margin = static_cast<btScalar>(rule);
+    }
     addCounts(counts);
     stats_.self_exact_tests += counts.tests;
     stats_.self_contacts += counts.contacts;

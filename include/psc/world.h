@@ -152,6 +152,12 @@ class SensorWorld {
   /// The body's self contact radius (selfContactRadius of its margin and rest shape); 0 when its
   /// self-collision is off. Self contacts should be made at this distance, not 2 × margin.
   double selfRadius(BodyId id) const;
+  /// The body's mean displacement in the last step() over its vertices on triangles, the `mean` of
+  /// psc::selfMotion that its self candidates were taken with; zero when its self-collision is off,
+  /// before its first step with it, under MotionBound::Swept, or when its previous positions come
+  /// in another scalar type (psc::selfMotion is then |d|). A self contact's radius is
+  /// selfRadius + motion_factor × selfMotion(d, this), not Bullet's margins + 2·|d|.
+  Vec3 selfMeanMotion(BodyId id) const;
   /// [beyond] The motion bound of one body pair with MotionBound::Radius: `ahead` = true hands the
   /// pair's exact test only what MotionBound::Ahead keeps (the pairs within the margins now and
   /// those the vertex and the triangle head into during the next ahead_steps steps) until the two
