@@ -315,6 +315,9 @@ void Installation::collideUndispatchedPairs() {
     if (!cache->needsBroadphaseCollision(a->getBroadphaseHandle(), b->getBroadphaseHandle()) ||
         !dispatcher_.needsCollision(a, b))
       continue;
+    // A pair the broadphase has was offered to the dispatcher this step: not collided, it was
+    // refused (the program's near callback, say), and stays refused.
+    if (cache->findPair(a->getBroadphaseHandle(), b->getBroadphaseHandle()) != nullptr) continue;
     collidePair(*a, vb, *b, tb);
     ++stats_.beyond_broadphase_pairs;
   }

@@ -56,6 +56,38 @@ TEST(Registration, InstalledBeforeBodiesExist) {
   EXPECT_GT(plugin.stats().contacts, 0u);
 }
 
+/// A near callback that refuses every soft–soft pair, as a program filtering pairs would.
+void refuseSoftPairs(btBroadphasePair& pair, btCollisionDispatcher& dispatcher, const btDispatcherInfo& info) {
+  const auto* a = static_cast<btCollisionObject*>(pair.m_pProxy0->m_clientObject);
+  const auto* b = static_cast<btCollisionObject*>(pair.m_pProxy1->m_clientObject);
+  if (btSoftBody::upcast(a) && btSoftBody::upcast(b)) return;
+  btCollisionDispatcher::defaultNearCallback(pair, dispatcher, info);
+}
+
+TEST(Registration, APairTheProgramsNearCallbackRefusesStaysRefused) {
+  // The plugin collides the body pairs whose candidates the broadphase does not have
+  // (Settings::beyond_broadphase), after Bullet's dispatch. A pair the broadphase has but the
+  // program's near callback refused was not collided either, and must stay so: it did get
+  // contacts (a review's finding). Bullet's own path makes none, and neither does the plugin.
+  for (const bool plugin_on : {false, true}) {
+    SoftWorld w(0);
+    w.dispatcher.setNearCallback(refuseSoftPairs);
+    psc::bullet::Plugin plugin;
+    if (plugin_on) plugin = psc::bullet::install(w.world);
+    addTouchingBalls(w);
+    int contacts = -1;
+    w.run(2, [&] {
+      contacts = 0;
+      for (int i = 0; i < w.world.getSoftBodyArray().size(); ++i) contacts += w.world.getSoftBodyArray()[i]->m_scontacts.size();
+    });
+    EXPECT_EQ(contacts, 0) << (plugin_on ? "plugin" : "Bullet");
+    if (plugin_on) {
+      EXPECT_EQ(plugin.stats().beyond_broadphase_pairs, 0u);
+      EXPECT_GT(plugin.stats().candidate_pairs, 0u) << "the sensors did find the touching pair";
+    }
+  }
+}
+
 TEST(Registration, InstalledAfterPairsCachedBulletsAlgorithm) {
   SoftWorld w(0);
   addTouchingBalls(w);
