@@ -143,6 +143,23 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
   if (again) ++b.repartitions;
 }
 
+namespace {
+
+/// Runs f() on body b's input; an Error that names no body is thrown again naming b (its label in
+/// the message, its id in Error::body()), so that a caller can leave that body out.
+template <class F>
+void forBody(const Body& b, F&& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    if (e.body() != Error::kNoBody) throw;
+    const std::string label = b.label();
+    throw Error(e.code(), e.message().rfind(label, 0) == 0 ? e.message() : label + ": " + e.message(), b.id);
+  }
+}
+
+}  // namespace
+
 void SensorWorld::Impl::preparePartitions(StepStats& stats) {
   bool any_new = membership_changed;
   for (const auto& kv : bodies) any_new = any_new || !kv.second->partitioned;
@@ -152,7 +169,9 @@ void SensorWorld::Impl::preparePartitions(StepStats& stats) {
   for (auto& kv : bodies) {
     Body& b = *kv.second;
     if (!b.parts)
-      b.parts = std::make_shared<const ConvexParts>(decomposeConvex(b.fullTopology(), b.positions, settings.decomposition));
+      forBody(b, [&] {
+        b.parts = std::make_shared<const ConvexParts>(decomposeConvex(b.fullTopology(), b.positions, settings.decomposition));
+      });
     budget_in.push_back({*b.parts, b.particle_override});
   }
   const std::vector<std::size_t> budget = particleBudget(budget_in);
@@ -165,7 +184,7 @@ void SensorWorld::Impl::preparePartitions(StepStats& stats) {
     const std::size_t count = std::clamp<std::size_t>(budget[k++], 1, cap);
     if (!b.partitioned || count != b.budget) {
       const bool again = b.partitioned;
-      partitionBody(b, count);
+      forBody(b, [&] { partitionBody(b, count); });
       if (again) ++stats.repartitions;
     }
   }
@@ -499,7 +518,7 @@ bool SensorWorld::refitNow(BodyId id) {
   // A new body or a changed membership: step() partitions first (and a partition refits itself).
   if (!b.partitioned || w.membership_changed) return false;
   b.refit_ahead = false;
-  w.refitAndCheck(b, w.ahead);  // throws for a non-finite vertex; step() then refits and throws again
+  forBody(b, [&] { w.refitAndCheck(b, w.ahead); });  // throws for a non-finite vertex; step() then refits and throws again
   b.refit_ahead = true;
   return true;
 }
@@ -525,7 +544,7 @@ const StepResult& SensorWorld::step() {
     if (b.refit_ahead)
       b.refit_ahead = false;  // refitNow() did it, closer to where the positions were written
     else
-      w.refitAndCheck(b, st);
+      forBody(b, [&] { w.refitAndCheck(b, st); });
   }
   st.ms_refit += w.ahead.ms_refit;
   st.ms_repartition += w.ahead.ms_repartition;

@@ -4,6 +4,7 @@
 
 #include <BulletCollision/BroadphaseCollision/btBroadphaseProxy.h>
 
+#include <cmath>
 #include <string>
 #include <utility>
 
@@ -41,6 +42,16 @@ double marginOf(const btSoftBody& body) { return body.getCollisionShape()->getMa
 
 std::string nameOf(const btSoftBody& body) {
   return "btSoftBody #" + std::to_string(body.getWorldArrayIndex());
+}
+
+bool nodesFinite(const btSoftBody& body) {
+  for (int i = 0; i < body.m_nodes.size(); ++i) {
+    const btSoftBody::Node& n = body.m_nodes[i];
+    if (!std::isfinite(n.m_x.x()) || !std::isfinite(n.m_x.y()) || !std::isfinite(n.m_x.z()) ||
+        !std::isfinite(n.m_q.x()) || !std::isfinite(n.m_q.y()) || !std::isfinite(n.m_q.z()))
+      return false;
+  }
+  return true;
 }
 
 void countRejected(const std::string& message, SyncCounters& counters) {
@@ -115,6 +126,7 @@ void BodyRegistry::add(btSoftBody& body, Record& record, psc::SensorWorld& senso
   record.margin = marginOf(body);
   record.id = psc::kInvalidBody;
   record.rejection.clear();
+  record.nonfinite = false;
   try {
     psc::BodyDesc desc;
     desc.name = nameOf(body);
@@ -140,7 +152,8 @@ void BodyRegistry::update(btSoftBody& body, Record& record, psc::SensorWorld& se
     return;
   }
   if (record.id == psc::kInvalidBody) {
-    const bool changed = dirty || !print.sameMesh(record.print) || print.nodes != record.print.nodes;
+    const bool changed = dirty || !print.sameMesh(record.print) || print.nodes != record.print.nodes ||
+                         (record.nonfinite && nodesFinite(body));
     if (changed) {
       add(body, record, sensors, counters);
     } else {
@@ -171,6 +184,22 @@ void BodyRegistry::update(btSoftBody& body, Record& record, psc::SensorWorld& se
     record.rejection = error.what();
     countRejected(record.rejection, counters);
   }
+}
+
+bool BodyRegistry::reject(psc::BodyId id, const std::string& message, psc::SensorWorld& sensors,
+                          SyncCounters& counters) {
+  const auto it = bodies_.find(id);
+  if (it == bodies_.end()) return false;
+  const auto rec = records_.find(it->second);
+  if (rec == records_.end() || rec->second.id != id) return false;
+  if (sensors.hasBody(id)) sensors.removeBody(id);
+  bodies_.erase(it);
+  rec->second.id = psc::kInvalidBody;
+  rec->second.rejection = message;
+  rec->second.nonfinite = true;
+  if (counters.bodies > 0) --counters.bodies;
+  countRejected(message, counters);
+  return true;
 }
 
 std::optional<psc::BodyId> BodyRegistry::idOf(const btSoftBody* body) const {

@@ -43,6 +43,11 @@ class BodyRegistry {
   btSoftBody* bodyOf(psc::BodyId id) const;
   /// Re-read the body's triangles at the next sync.
   void markDirty(const btSoftBody* body) { dirty_.insert(body); }
+  /// Takes out of the sensor world a body whose input the core could not step (psc::Error::body():
+  /// non-finite nodes, say), with the core's message: it is then left out like a rejected body, and
+  /// offered again at a sync that finds all its nodes finite (or its mesh changed). False when no
+  /// registered body has that id.
+  bool reject(psc::BodyId id, const std::string& message, psc::SensorWorld& sensors, SyncCounters& counters);
 
  private:
   struct Fingerprint {
@@ -63,6 +68,7 @@ class BodyRegistry {
     psc::BodyId id = psc::kInvalidBody;  ///< kInvalidBody: participating but rejected by the core
     double margin = 0.0;
     std::string rejection;  ///< the core's message when id is kInvalidBody
+    bool nonfinite = false;  ///< rejected during a step (reject()): offered again once its nodes are finite
     bool seen = false;
   };
 

@@ -420,7 +420,23 @@ void Installation::senseOncePerStep() {
     stats_.bodies = sync.bodies;
     stats_.skipped_bodies = sync.skipped;
     stats_.skipped_reason = sync.first_rejection;
-    const psc::StepResult& result = sensors_.step();
+    // A body whose input the core cannot step (its nodes became non-finite) is left out, like a
+    // body rejected when it came (stats: skipped_bodies, skipped_reason), and the others are stepped:
+    // one broken body must not take the sensors away from every pair.
+    const psc::StepResult* stepped = nullptr;
+    for (std::size_t tries = 0; stepped == nullptr; ++tries) {
+      try {
+        stepped = &sensors_.step();
+      } catch (const psc::Error& error) {
+        if (error.body() == psc::Error::kNoBody || tries > sync.bodies ||
+            !registry_.reject(error.body(), error.what(), sensors_, sync))
+          throw;
+        stats_.bodies = sync.bodies;
+        stats_.skipped_bodies = sync.skipped;
+        stats_.skipped_reason = sync.first_rejection;
+      }
+    }
+    const psc::StepResult& result = *stepped;
     stats_.core = result.stats;
     stats_.particles = result.stats.particles;
     stats_.rounds = result.stats.rounds;

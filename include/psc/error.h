@@ -3,6 +3,7 @@
 // counters in StepStats, never exceptions.
 #pragma once
 
+#include <cstdint>
 #include <stdexcept>
 #include <string>
 
@@ -19,12 +20,21 @@ const char* toString(ErrorCode code);
 
 class Error : public std::runtime_error {
  public:
-  Error(ErrorCode code, const std::string& message)
-      : std::runtime_error(std::string(toString(code)) + ": " + message), code_(code) {}
+  static constexpr std::uint32_t kNoBody = 0xFFFFFFFFu;  ///< psc::kInvalidBody
+  Error(ErrorCode code, const std::string& message, std::uint32_t body = kNoBody)
+      : std::runtime_error(std::string(toString(code)) + ": " + message), code_(code), message_(message), body_(body) {}
   ErrorCode code() const { return code_; }
+  /// what() without the code's prefix.
+  const std::string& message() const { return message_; }
+  /// The body (a SensorWorld's BodyId) whose input the error is about, when SensorWorld::step()
+  /// knows it (one body's positions became non-finite, say), so that a caller can leave that body
+  /// out and step the others; kNoBody otherwise.
+  std::uint32_t body() const { return body_; }
 
  private:
   ErrorCode code_;
+  std::string message_;
+  std::uint32_t body_;
 };
 
 }  // namespace psc

@@ -10,6 +10,9 @@
 #include <gtest/gtest.h>
 
 #include <iostream>
+#include <optional>
+#include <limits>
+#include <cmath>
 
 namespace {
 
@@ -160,6 +163,52 @@ TEST(Bodies, ABodyWithoutFacesIsSkippedNotFatal) {
   w.world.removeSoftBody(rope);
   delete rope;
   (void)ball;
+}
+
+TEST(Bodies, ABodyWhoseNodesBecomeNonFiniteIsLeftOutAndTheOthersKeepTheirContacts) {
+  // A far body gets a NaN node mid-run. The core cannot step it; before, that sent every pair back
+  // to Bullet's algorithm, and with OptIn::Explicit (no VF_SS on the bodies) every soft–soft
+  // contact was lost, step after step (a review's finding). Now that body alone is left out (named
+  // in skipped_reason), the touching pair keeps its contacts, and once the node is finite again the
+  // body comes back.
+  SoftWorld w(0);
+  psc_test::SoftParams params;
+  params.vf_ss = false;
+  btSoftBody* a = w.addSoft(psc::makeSphere(0.5, 200).translate({-0.49, 0, 0}), params);
+  btSoftBody* b = w.addSoft(psc::makeSphere(0.5, 200).translate({0.49, 0, 0}), params);
+  btSoftBody* far = w.addSoft(psc::makeSphere(0.5, 200).translate({10, 0, 0}), params);
+  far->m_cfg.piterations = 1;
+  psc::bullet::Settings settings;
+  settings.opt_in = psc::bullet::OptIn::Explicit;
+  auto plugin = psc::bullet::install(w.world, settings);
+  for (btSoftBody* body : {a, b, far}) plugin.setEnabled(body, true);
+  int contacts = 0;
+  const auto count = [&] { contacts = a->m_scontacts.size() + b->m_scontacts.size(); };
+  w.run(2, count);
+  ASSERT_GT(contacts, 0);
+  EXPECT_EQ(plugin.stats().bodies, 3u);
+  std::vector<btVector3> kept;
+  for (int i = 0; i < far->m_nodes.size(); ++i) kept.push_back(far->m_nodes[i].m_x);
+  far->m_nodes[5].m_x.setX(std::numeric_limits<btScalar>::quiet_NaN());
+  w.run(1, count);
+  EXPECT_GT(contacts, 0) << "the touching pair keeps its contacts";
+  EXPECT_TRUE(plugin.stats().error.empty()) << plugin.stats().error;
+  EXPECT_EQ(plugin.stats().bodies, 2u);
+  EXPECT_EQ(plugin.stats().skipped_bodies, 1u);
+  EXPECT_NE(plugin.stats().skipped_reason.find("non-finite"), std::string::npos) << plugin.stats().skipped_reason;
+  EXPECT_EQ(plugin.bodyId(far), std::nullopt);
+  w.run(1, count);
+  EXPECT_GT(contacts, 0);
+  EXPECT_EQ(plugin.stats().skipped_bodies, 1u) << "left out while the node stays non-finite";
+  // Bullet's solver spreads the NaN through the links: the whole body is put back as it was.
+  for (int i = 0; i < far->m_nodes.size(); ++i) {
+    btSoftBody::Node& n = far->m_nodes[i];
+    n.m_x = n.m_q = kept[static_cast<std::size_t>(i)];
+    n.m_v = n.m_f = btVector3(0, 0, 0);
+  }
+  w.run(1, count);
+  EXPECT_EQ(plugin.stats().bodies, 3u) << plugin.stats().skipped_reason;
+  EXPECT_TRUE(plugin.bodyId(far).has_value());
 }
 
 // A body whose nodes are all pinned (inverse mass 0) is a valid, immovable soft body: the plugin

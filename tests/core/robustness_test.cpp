@@ -177,6 +177,27 @@ TEST(BadMesh, NonFiniteCoordinateNamesBodyVertexAndView) {
   b.previous[9].z() = kNaN;
   SensorWorld w;
   EXPECT_ERROR_NAMES(w.addBody(descOf(b)), "ball", "previous positions", "vertex 9");
+  // Positions that turn non-finite after the body came: step() names the body, in the message and
+  // in Error::body(), so that a caller (the Bullet plugin) can leave it out and step the others.
+  Body good = bodyOf(makeSphere(1.0, 100), "ball");
+  Body other = bodyOf(makeSphere(1.0, 100).translate({5, 0, 0}), "other");
+  SensorWorld later;
+  later.addBody(descOf(other));
+  const BodyId id = later.addBody(descOf(good));
+  later.step();
+  good.mesh.vertices[7].x() = kNaN;
+  later.setPositions(id, PositionView::of(good.mesh.vertices));
+  try {
+    later.step();
+    ADD_FAILURE() << "a non-finite position must be an error";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.body(), id);
+    EXPECT_EQ(e.code(), ErrorCode::InvalidMesh);
+    EXPECT_NE(e.message().find("ball"), std::string::npos) << e.message();
+    EXPECT_NE(std::string(e.what()).find("vertex 7"), std::string::npos) << e.what();
+  }
+  later.removeBody(id);
+  EXPECT_NO_THROW(later.step()) << "the others step without it";
 }
 
 // Single-precision positions take the refit's packed path (bounds.cpp, streamBoxesFloat): the same
