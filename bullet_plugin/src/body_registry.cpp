@@ -4,7 +4,9 @@
 
 #include <BulletCollision/BroadphaseCollision/btBroadphaseProxy.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <string>
 #include <utility>
 
@@ -67,6 +69,19 @@ BodyRegistry::Fingerprint BodyRegistry::fingerprintOf(const btSoftBody& body) {
   print.nodes = print.node_count > 0 ? static_cast<const void*>(&body.m_nodes[0]) : nullptr;
   print.face_count = body.m_faces.size();
   print.faces = print.face_count > 0 ? static_cast<const void*>(&body.m_faces[0]) : nullptr;
+  if (print.face_count > 0 && print.node_count > 0) {
+    const auto base = reinterpret_cast<std::uintptr_t>(&body.m_nodes[0]);
+    std::uint64_t h = 1469598103934665603ull;  // FNV-1a over the sampled faces' node offsets
+    const int samples = std::min(16, print.face_count);
+    for (int s = 0; s < samples; ++s) {
+      const btSoftBody::Face& f = body.m_faces[static_cast<int>(std::int64_t{s} * print.face_count / samples)];
+      for (const btSoftBody::Node* n : f.m_n) {
+        h ^= static_cast<std::uint64_t>(reinterpret_cast<std::uintptr_t>(n) - base);
+        h *= 1099511628211ull;
+      }
+    }
+    print.topology = h;
+  }
   const btBroadphaseProxy* proxy = body.getBroadphaseHandle();
   print.proxy = proxy;
   print.proxy_id = proxy != nullptr ? proxy->getUid() : -1;

@@ -5,6 +5,7 @@
 
 #include <BulletSoftBody/btSoftBody.h>
 
+#include <cstdint>
 #include <functional>
 #include <optional>
 #include <string>
@@ -57,9 +58,15 @@ class BodyRegistry {
     int face_count = 0;
     const void* proxy = nullptr;
     int proxy_id = 0;
+    /// The node indices of up to 16 faces spread over the array, hashed: broadphases that recycle
+    /// proxies (btAxisSweep3, btSimpleBroadphase) give a body deleted and another added in its
+    /// place the same proxy and uid, and the new one often the same address, buffers and counts;
+    /// its triangles then differ here (a review's finding: a respawned grid cloth of the other
+    /// diagonal kept the old triangles).
+    std::uint64_t topology = 0;
     bool sameBody(const Fingerprint& o) const { return proxy == o.proxy && proxy_id == o.proxy_id; }
     bool sameMesh(const Fingerprint& o) const {
-      return node_count == o.node_count && faces == o.faces && face_count == o.face_count;
+      return node_count == o.node_count && faces == o.faces && face_count == o.face_count && topology == o.topology;
     }
     bool same(const Fingerprint& o) const { return sameBody(o) && sameMesh(o) && nodes == o.nodes; }
   };

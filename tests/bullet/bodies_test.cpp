@@ -6,7 +6,11 @@
 #include "psc/bullet/bullet.h"
 #include "soft_world.h"
 
+#include <BulletCollision/BroadphaseCollision/btAxisSweep3.h>
+#include <BulletDynamics/ConstraintSolver/btSequentialImpulseConstraintSolver.h>
 #include <BulletSoftBody/btSoftBodyHelpers.h>
+#include <BulletSoftBody/btSoftBodyRigidBodyCollisionConfiguration.h>
+#include <BulletSoftBody/btSoftRigidDynamicsWorld.h>
 #include <gtest/gtest.h>
 
 #include <iostream>
@@ -209,6 +213,81 @@ TEST(Bodies, ABodyWhoseNodesBecomeNonFiniteIsLeftOutAndTheOthersKeepTheirContact
   w.run(1, count);
   EXPECT_EQ(plugin.stats().bodies, 3u) << plugin.stats().skipped_reason;
   EXPECT_TRUE(plugin.bodyId(far).has_value());
+}
+
+/// A grid cloth of n × n nodes at height y, its squares split along one diagonal or the other (the
+/// same node and face counts either way), VF_SS on.
+btSoftBody* gridCloth(btSoftBodyWorldInfo& info, int n, float y, bool diagonal) {
+  std::vector<btVector3> x;
+  std::vector<btScalar> m;
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) x.emplace_back(float(i) / float(n - 1), y, float(j) / float(n - 1)), m.push_back(1);
+  auto* b = new btSoftBody(&info, n * n, x.data(), m.data());
+  b->m_faces.reserve(2 * (n - 1) * (n - 1));
+  const auto id = [n](int i, int j) { return j * n + i; };
+  for (int j = 0; j + 1 < n; ++j)
+    for (int i = 0; i + 1 < n; ++i) {
+      if (diagonal) {
+        b->appendFace(id(i, j), id(i + 1, j), id(i + 1, j + 1));
+        b->appendFace(id(i, j), id(i + 1, j + 1), id(i, j + 1));
+      } else {
+        b->appendFace(id(i, j), id(i + 1, j), id(i, j + 1));
+        b->appendFace(id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+      }
+    }
+  for (int f = 0; f < b->m_faces.size(); ++f)
+    for (int k = 0; k < 3; ++k) b->appendLink(b->m_faces[f].m_n[k], b->m_faces[f].m_n[(k + 1) % 3], nullptr, true);
+  b->getCollisionShape()->setMargin(0.02f);
+  b->m_cfg.collisions |= btSoftBody::fCollision::VF_SS;
+  return b;
+}
+
+TEST(Bodies, ABodyRespawnedInARecycledProxyGetsItsOwnTriangles) {
+  // btAxisSweep3 reuses a freed proxy and its uid: a body deleted and another added in its place
+  // often has the same address, proxy, uid, face buffer and counts. The registry took it for the
+  // old one and kept the old triangles (a review's finding); it now also compares a sample of the
+  // faces' nodes. Each round a cloth of the other diagonal takes the place of the one before.
+  btSoftBodyRigidBodyCollisionConfiguration config;
+  btCollisionDispatcher dispatcher(&config);
+  btAxisSweep3 broadphase(btVector3(-10, -10, -10), btVector3(10, 10, 10));
+  btSequentialImpulseConstraintSolver solver;
+  btSoftRigidDynamicsWorld world(&dispatcher, &broadphase, &solver, &config);
+  world.setGravity(btVector3(0, 0, 0));
+  world.getWorldInfo().m_gravity.setValue(0, 0, 0);
+  world.getWorldInfo().m_sparsesdf.Initialize();
+  btSoftBody* floor = gridCloth(world.getWorldInfo(), 12, 0.0f, true);
+  world.addSoftBody(floor);
+  auto plugin = psc::bullet::install(world);
+  const auto step = [&] { world.stepSimulation(1.0f / 60, 0, 1.0f / 60); };
+  step();
+  int recycled = 0;
+  for (int round = 0; round < 10; ++round) {
+    btSoftBody* a = gridCloth(world.getWorldInfo(), 12, 0.03f, round % 2 == 0);
+    world.addSoftBody(a);
+    step();
+    const btBroadphaseProxy* proxy = a->getBroadphaseHandle();
+    const int uid = proxy->getUid();
+    world.removeSoftBody(a);
+    delete a;
+    btSoftBody* b = gridCloth(world.getWorldInfo(), 12, 0.03f, round % 2 != 0);
+    world.addSoftBody(b);
+    recycled += b->getBroadphaseHandle() == proxy && b->getBroadphaseHandle()->getUid() == uid;
+    step();
+    const auto id = plugin.bodyId(b);
+    ASSERT_TRUE(id.has_value());
+    const psc::MeshTopology& topology = plugin.sensorWorld().topology(*id);
+    int differ = 0;
+    for (int f = 0; f < b->m_faces.size(); ++f)
+      for (int k = 0; k < 3; ++k)
+        differ += int(topology.triangle(static_cast<psc::Index>(f))[k]) != int(b->m_faces[f].m_n[k] - &b->m_nodes[0]);
+    EXPECT_EQ(differ, 0) << "round " << round;
+    world.removeSoftBody(b);
+    delete b;
+  }
+  EXPECT_GT(recycled, 0) << "the broadphase must recycle proxies for this test to mean anything";
+  plugin.uninstall();
+  world.removeSoftBody(floor);
+  delete floor;
 }
 
 // A body whose nodes are all pinned (inverse mass 0) is a valid, immovable soft body: the plugin
