@@ -16,7 +16,9 @@
 //   the candidate pairs the broadphase did not dispatch (Settings::beyond_broadphase);
 // - for each pair of participating bodies runs Bullet's own btSoftColliders::CollideVF_SS on the
 //   core's candidate (node, face) pairs, both directions, each at most once per step, so the
-//   btSoftBody::SContacts are the ones Bullet's default path makes for the same (node, face);
+//   btSoftBody::SContacts are the ones Bullet's default path makes for the same (node, face)
+//   (then, by default, the constraint mixing of crowded nodes and runaway pairs shared:
+//   Settings::crowded_band, runaway_sharing; a self contact's margin is the self rule's radius);
 // - soft-rigid and rigid-rigid collision are untouched; pairs with a non-participating body go to
 //   the algorithm registered before install() (Bullet's own by default);
 // - self-collision only where asked (Settings::self_collision, setSelfCollision): the core's

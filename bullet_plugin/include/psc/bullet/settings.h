@@ -23,7 +23,9 @@ enum class OptIn {
 /// The exact (node, face) test the plugin runs on each of the core's candidate pairs. Costs per
 /// test and what each guarantees: README "Exact tests"; the functions themselves: exact.h.
 enum class ExactTest {
-  /// Bullet's own btSoftColliders::CollideVF_SS, unchanged: the contacts of Bullet's default path.
+  /// Bullet's own btSoftColliders::CollideVF_SS, unchanged: the contacts of Bullet's default path
+  /// (whose weights Settings::runaway_sharing and crowded_band may then share, m_cfm divided, and
+  /// whose margin a self contact gets from the self rule: README "Contact set", docs/METHOD.md §6.3).
   /// It refuses every face with |cross|² ≤ SIMD_EPSILON (area below ~1.7e-4 units² in float).
   Bullet,
   /// Bullet's contact, bit for bit, wherever CollideVF_SS accepts the pair (except that a node
