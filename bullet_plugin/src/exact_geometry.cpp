@@ -122,15 +122,23 @@ std::optional<Crossing> firstCrossing(const std::array<Vec3, 4>& start, const st
     if (cp.distance2 > kCrossingTolerance * kCrossingTolerance * reach2) return std::nullopt;
     return Crossing{t, cp.weights};
   };
+  // After the first crossing in piece i: the later sign changes through the triangle.
+  const auto withReturns = [&](Crossing hit, int i) {
+    for (int j = i + 1; j + 1 < count; ++j) {
+      if (std::abs(fs[j]) <= tol || std::abs(fs[j + 1]) <= tol || (fs[j] > 0.0) == (fs[j + 1] > 0.0)) continue;
+      hit.returns += meets(rootInPiece(c, s[j], s[j + 1], fs[j], fs[j + 1])).has_value() ? 1 : 0;
+    }
+    return hit;
+  };
   for (int i = 0; i + 1 < count; ++i) {
     // A start in the plane (i = 0) has no side to leave: not a crossing.
     if (std::abs(fs[i]) <= tol) {
       if (i > 0)
-        if (auto hit = meets(s[i])) return hit;
+        if (auto hit = meets(s[i])) return withReturns(*hit, i);
       continue;
     }
     if (std::abs(fs[i + 1]) <= tol || (fs[i] > 0.0) == (fs[i + 1] > 0.0)) continue;
-    if (auto hit = meets(rootInPiece(c, s[i], s[i + 1], fs[i], fs[i + 1]))) return hit;
+    if (auto hit = meets(rootInPiece(c, s[i], s[i + 1], fs[i], fs[i + 1]))) return withReturns(*hit, i);
   }
   if (std::abs(fs[count - 1]) <= tol) return meets(1.0);
   return std::nullopt;

@@ -114,6 +114,15 @@ Vec3 facePoint(const btSoftBody::Face& face, const std::array<double, 3>& w, boo
   return p;
 }
 
+/// Every position of the pair (m_x and m_q of the node and the face's corners) is finite.
+bool finitePair(const btSoftBody::Node& node, const btSoftBody::Face& face) {
+  const auto finite = [](const btSoftBody::Node& n) {
+    return std::isfinite(n.m_x.x()) && std::isfinite(n.m_x.y()) && std::isfinite(n.m_x.z()) &&
+           std::isfinite(n.m_q.x()) && std::isfinite(n.m_q.y()) && std::isfinite(n.m_q.z());
+  };
+  return finite(node) && finite(*face.m_n[0]) && finite(*face.m_n[1]) && finite(*face.m_n[2]);
+}
+
 /// The unit normal of the face at its current positions, or zero when it is degenerate relative
 /// to its own size.
 Vec3 faceNormal(const Vec3& a, const Vec3& b, const Vec3& c) {
@@ -180,6 +189,9 @@ ContactKind discreteTest(bool robust, const PairContext& ctx, const btSoftBody::
 /// most such pairs, so either gives the same contact bit for bit.
 ContactKind robustContact(const PairContext& ctx, const btSoftBody::Node& node, const btSoftBody::Face& face,
                           btScalar m, btSoftBody::SContact& contact) {
+  // A non-finite corner or radius (a review's finding, stop 46: an infinite corner gave a NaN
+  // normal) has no closest point to speak of.
+  if (!std::isfinite(m) || !finitePair(node, face)) return ContactKind::None;
   if constexpr (sizeof(btScalar) == sizeof(float)) {
     using F3 = detail::RobustV3<float>;
     // Relative to the node (robust_kernel.h), as the lanes compute it: p = 0.
@@ -194,7 +206,8 @@ ContactKind robustContact(const PairContext& ctx, const btSoftBody::Node& node, 
       const auto radius = static_cast<float>(m);
       if (!(distance2 < radius * radius)) return ContactKind::None;
       F3 n;
-      if (!detail::robustNormal(p, a, b, c, wa, wb, wc, radius, float(detail::kSingleShort), n))
+      if (!detail::robustNormal(p, a, b, c, wa, wb, wc, radius, float(detail::kSingleShort),
+                                 float(detail::kSingleFaceShort), n))
         return fillContact(ctx, node, face, btVector3(wa, wb, wc), btVector3(n.x, n.y, n.z), m, contact)
                    ? ContactKind::Robust
                    : ContactKind::None;
@@ -208,7 +221,8 @@ ContactKind robustContact(const PairContext& ctx, const btSoftBody::Node& node, 
   using detail::robustV3;
   detail::RobustV3<double> n;
   const bool short_away = detail::robustNormal(robustV3(po), robustV3(a), robustV3(b), robustV3(c), cp.weights[0],
-                                               cp.weights[1], cp.weights[2], radius, detail::kDoubleShort, n);
+                                               cp.weights[1], cp.weights[2], radius, detail::kDoubleShort,
+                                               detail::kDoubleFaceShort, n);
   const Vec3 normal = short_away ? normalWithoutDistance(node, face, cp.weights) : Vec3(n.x, n.y, n.z);
   const btVector3 w{btScalar(cp.weights[0]), btScalar(cp.weights[1]), btScalar(cp.weights[2])};
   return fillContact(ctx, node, face, w, toBt(normal), m, contact) ? ContactKind::Robust : ContactKind::None;
@@ -238,7 +252,14 @@ ContactKind crossingOver(const PairContext& ctx, const btSoftBody::Node& node, c
   const std::array<Vec3, 4> end{toVec(node.m_x), toVec(face.m_n[0]->m_x), toVec(face.m_n[1]->m_x),
                                 toVec(face.m_n[2]->m_x)};
   const std::optional<Crossing> crossing = firstCrossing(start, end);
-  if (!crossing) return discrete;
+  // A node that came back through the face within the step (a review's finding, stop 46: a face
+  // turning under a node that passes at a shallow angle) is on its own side: no push. The side
+  // below is judged with today's normal against the start positions, not in the face's own frame
+  // of each time: on a cloth hit by a fast ball, whose faces turn by up to 2.7 rad in a step, the
+  // face's own frame left a node that crossed it and came back across its plane beside it (behind
+  // the surface there) with no crossing contact, and 85 vertices tunnelled against none
+  // (docs/DECISIONS.md, "Stop 46").
+  if (!crossing || crossing->returns % 2 == 1) return discrete;
   const std::array<double, 3>& w = crossing->weights;
   // The normal: the face's at the end of the step (else at the crossing, else at the start),
   // towards the side the node started on; a node starting in the plane: against its motion.
@@ -299,6 +320,7 @@ ExactTest exactTestFromString(const std::string& text) {
 ContactKind exactContact(ExactTest test, const btSoftBody& node_body, const btSoftBody::Node& node,
                          const btSoftBody& face_body, const btSoftBody::Face& face, btSoftBody::SContact& contact) {
   PairContext ctx = contextOf(node_body, face_body);
+  if (!std::isfinite(ctx.mrg) || !finitePair(node, face)) return ContactKind::None;
   ctx.motion_term = motionTermFor(test, node_body, face_body);
   switch (test) {
     case ExactTest::Bullet: return discreteTest(false, ctx, node, face, contact);

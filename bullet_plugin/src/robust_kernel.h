@@ -77,6 +77,14 @@ constexpr double kSingleSmallest2 = 1e-12;
 /// relative to the coordinates, would turn the direction.
 constexpr double kSingleShort = 1e-2;
 constexpr double kDoubleShort = 1e-9;
+/// ... and so does a node nearer than this times the face point's own rounding, which grows with
+/// the face, not the radius: about 2 ε L (L / h)² for a face of longest edge L and height h (ε the
+/// precision's unit roundoff; at most 2.4e-4 L in single precision, kSingleThin). A hundred times
+/// that keeps the direction within a hundredth of a radian when the radius is far below the face
+/// (a review's finding, stop 46: 47° off at a radius of 1e-4 of the face). The double path's own
+/// short pairs get the face's normal (normalWithoutDistance).
+constexpr double kSingleFaceShort = 100.0 * 2.0 * 1.1920928955078125e-07;
+constexpr double kDoubleFaceShort = 100.0 * 2.0 * 2.220446049250313e-16;
 
 template <class R>
 struct RobustV3 {
@@ -192,20 +200,30 @@ template <class R>
 
 /// The contact's direction: p minus the face point at weights (wa, wb, wc), evaluated as the face
 /// point is, from zero, corner by corner; its length, and the unit normal away · (1 / length). `short`
-/// holds where the length is at most `short_fraction` of the radius (kSingleShort, kDoubleShort):
-/// there the normal is the caller's to find.
+/// holds where the length is at most `short_fraction` of the radius (kSingleShort, kDoubleShort) or
+/// at most `face_fraction` (kSingleFaceShort, kDoubleFaceShort) times L · (L / h)² for a point
+/// inside the face (L · 1 on an edge or a corner), L² = the longest edge², (L h)² ≈ |ab × ac|²:
+/// there the normal is the caller's to find (inside the face, the face's normal is the direction).
 template <class R>
 [[gnu::always_inline]] inline auto robustNormal(const RobustV3<R>& p, const RobustV3<R>& a, const RobustV3<R>& b,
                                                 const RobustV3<R>& c, R wa, R wb, R wc, R radius, R short_fraction,
-                                                RobustV3<R>& normal) {
+                                                R face_fraction, RobustV3<R>& normal) {
   const R zero(0.0);
   const RobustV3<R> f{((zero + wa * a.x) + wb * b.x) + wc * c.x, ((zero + wa * a.y) + wb * b.y) + wc * c.y,
                       ((zero + wa * a.z) + wb * b.z) + wc * c.z};
   const RobustV3<R> away = minus(p, f);
-  const R length = sqrt(dot3(away, away));
+  const R length2 = dot3(away, away);
+  const R length = sqrt(length2);
   const R inverse = R(1.0) / length;
   normal = {away.x * inverse, away.y * inverse, away.z * inverse};
-  return notGreater(length, short_fraction * radius);
+  // The inside's weights come from products of the corners' differences, whose rounding (L / h)²
+  // amplifies; an edge's or a corner's only from one division along the edge.
+  R n2, longest2;
+  robustShape(a, b, c, n2, longest2);
+  const auto inside = both(both(gt(wa, zero), gt(wb, zero)), gt(wc, zero));
+  const R amplified = select(inside, longest2 * longest2 / n2, R(1.0));
+  const R face_short = face_fraction * amplified;
+  return either(notGreater(length, short_fraction * radius), notGreater(length2, (face_short * face_short) * longest2));
 }
 
 template <class R>

@@ -268,7 +268,7 @@ void robustLanesAvx(const VfLanesIn& in, const float* margin, std::uint32_t lane
   const F8 radius{_mm256_load_ps(margin)};
   const M8 within = lt(distance2, radius * radius);
   RobustV3<F8> n;
-  const M8 short_away = robustNormal(p, a, b, c, wa, wb, wc, radius, F8(kSingleShort), n);
+  const M8 short_away = robustNormal(p, a, b, c, wa, wb, wc, radius, F8(kSingleShort), F8(kSingleFaceShort), n);
   _mm256_store_ps(out.wx, wa.v);
   _mm256_store_ps(out.wy, wb.v);
   _mm256_store_ps(out.wz, wc.v);

@@ -36,6 +36,9 @@ enum class ContactKind {
 /// Runs `test` on node `node` of `node_body` against face `face` of `face_body` (different
 /// bodies). On a contact, writes it to `contact` (what CollideVF_SS would push into
 /// node_body.m_scontacts) and returns its kind; otherwise returns None and leaves `contact` alone.
+/// A pair with a non-finite position (m_x or m_q of the node or of a corner) or margin has no
+/// contact, whatever the test: Bullet's own test reads a point it never set there, and a NaN
+/// normal would carry into the solver.
 ContactKind exactContact(ExactTest test, const btSoftBody& node_body, const btSoftBody::Node& node,
                          const btSoftBody& face_body, const btSoftBody::Face& face, btSoftBody::SContact& contact);
 
@@ -64,7 +67,9 @@ struct ExactCounts {
 /// With ContactSet::NearestFace, of each node's contacts of this call only the discrete one
 /// nearest to the node (|m_x − the face point at the contact's weights|, in btScalar; the first of
 /// equals) and its crossing contacts stay, in candidate order; ExactCounts::reduced counts the rest.
-/// The candidates' indices must be valid for the bodies' m_nodes / m_faces.
+/// The candidates' indices must be valid for the bodies' m_nodes / m_faces, and their positions
+/// and margins finite (the plugin leaves a body with a non-finite node out of the sensors, so no
+/// candidate of it comes here; exactContact checks it per pair).
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body,
                               const psc::CandidatePair* first, const psc::CandidatePair* last,
                               ContactSet contacts = ContactSet::AllPairs);
@@ -104,6 +109,10 @@ ClosestPoint closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3& b,
 struct Crossing {
   double t = 0.0;                  ///< fraction of the step, in [0, 1]
   std::array<double, 3> weights{}; ///< barycentric weights of the meeting point on the triangle at t
+  /// How many times after t, up to the step's end, the point passes back through the triangle
+  /// (a later sign change of the coplanarity with the point within kCrossingTolerance of it): odd
+  /// when it came back through the triangle to the side it started on.
+  int returns = 0;
 };
 
 /// Relative tolerance of firstCrossing's inside test: the point counts as on the triangle when its
