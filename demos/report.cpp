@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
@@ -37,6 +38,9 @@ std::string fixed(double v, int digits) {
   std::snprintf(buf, sizeof buf, "%.*f", digits, v);
   return buf;
 }
+
+/// A recall: "none" where its truth was empty (kNoTruth).
+std::string recallText(double v, int digits) { return std::isnan(v) ? "none" : fixed(v, digits); }
 
 /// Keeps 3 significant digits for small times and whole numbers for large ones.
 std::string ms(double v) {
@@ -251,9 +255,11 @@ void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
                 "pen n", "cross", "self-x", "self rec", "MB");
   out << line;
   for (const RunResult& r : runs) {
-    const std::string strict = r.has_strict ? fixed(r.recall_strict, 4) + "/" + fixed(r.recall_strict_worst_step, 3) : "-";
-    const std::string full = r.has_full ? fixed(r.recall_full, 4) + "/" + fixed(r.recall_full_worst_step, 3) : "-";
-    const std::string pairs = (r.has_strict || r.has_full) ? fixed(r.pair_recall, 3) : "-";
+    const std::string strict =
+        r.has_strict ? recallText(r.recall_strict, 4) + "/" + recallText(r.recall_strict_worst_step, 3) : "-";
+    const std::string full =
+        r.has_full ? recallText(r.recall_full, 4) + "/" + recallText(r.recall_full_worst_step, 3) : "-";
+    const std::string pairs = (r.has_strict || r.has_full) ? recallText(r.pair_recall, 3) : "-";
     const std::string outside = r.has_full ? count(double(r.contacts_outside_truth)) : "-";
     const std::string flagged = r.has_sensor_figures ? count(r.flagged_pairs_per_step) : "-";
     // Bullet's collision mean over this run's, on the rows of our pipelines.
@@ -261,7 +267,7 @@ void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
                                : r.pipeline == Pipeline::Bounds ? r.ratio_bullet_over_bounds
                                                                 : 0.0;
     const std::string ratio = b_over_ours > 0 ? fixed(b_over_ours, 2) : "";
-    const std::string self_recall = r.has_self_truth ? fixed(r.self_recall_strict, 4) : "-";
+    const std::string self_recall = r.has_self_truth ? recallText(r.self_recall_strict, 4) : "-";
     std::snprintf(line, sizeof line, head, r.scene.c_str(), std::to_string(r.resolution).c_str(),
                   std::to_string(r.bodies).c_str(), std::to_string(r.steps).c_str(), name_width, runName(r).c_str(), strict.c_str(),
                   full.c_str(), pairs.c_str(), outside.c_str(), count(r.exact_tests_per_step).c_str(), flagged.c_str(),

@@ -299,6 +299,11 @@ void Installation::detach(SoftBodySolver& solver) {
 }
 
 void Installation::collideUndispatchedPairs() {
+  // The walk over the candidates is part of the exact stage's time (a review's finding, stop 46:
+  // about 0.6 ns a candidate went untimed): the pairs collided here add their own time, which the
+  // walk's includes, so the walk's replaces theirs.
+  const auto start = std::chrono::steady_clock::now();
+  const double ms_exact_before = stats_.ms_exact;
   const std::vector<psc::CandidatePair>& candidates = sensors_.lastResult().candidates;
   btOverlappingPairCache* cache = world_.getBroadphase()->getOverlappingPairCache();
   for (std::size_t i = 0; i < candidates.size();) {
@@ -321,6 +326,7 @@ void Installation::collideUndispatchedPairs() {
     collidePair(*a, vb, *b, tb);
     ++stats_.beyond_broadphase_pairs;
   }
+  stats_.ms_exact = ms_exact_before + millisecondsSince(start);
 }
 
 void Installation::addCounts(const ExactCounts& counts) {

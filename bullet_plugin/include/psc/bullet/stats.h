@@ -76,7 +76,7 @@ struct Stats {
   std::size_t refit_after_predict = 0;
   /// Body synchronisation + SensorWorld::step() + the refits done after predictMotion, wall clock.
   double ms_sensor_step = 0.0;
-  double ms_exact = 0.0;              ///< the exact stage, summed over the step's pairs, wall clock
+  double ms_exact = 0.0;              ///< the exact stage, summed over the step's pairs (with the walk for pairs beyond the broadphase), wall clock
   /// Non-empty when the core rejected this step (e.g. a non-finite node position): every pair then
   /// went to Bullet's previous algorithm instead. Never thrown through Bullet's dispatch.
   std::string error;
