@@ -746,7 +746,8 @@ std::size_t CrossingCounter::selfCrossingsOf(const BodyItems& body, const ItemSp
 }
 
 std::size_t CrossingCounter::tunnelledVertices(const std::vector<CrossingMesh>& meshes, const BodyPositions& before,
-                                               const BodyPositions& after, const std::vector<std::vector<char>>& skip) {
+                                               const BodyPositions& after, const std::vector<std::vector<char>>& skip,
+                                               std::size_t* passed) {
   const Box empty{Vec3::Constant(std::numeric_limits<double>::infinity()),
                   Vec3::Constant(-std::numeric_limits<double>::infinity())};
   std::vector<Box> body_boxes(meshes.size(), empty);
@@ -768,11 +769,12 @@ std::size_t CrossingCounter::tunnelledVertices(const std::vector<CrossingMesh>& 
     pad(box.lo, box.hi);
     return true;
   });
-  std::size_t count = 0;
+  std::size_t count = 0, all = 0;
   for (std::size_t a = 0; a < meshes.size(); ++a) {
     if (!meetsOther(body_boxes, a, body_boxes[a])) continue;
     for (std::size_t v = 0; v < after[a].size(); ++v) {
-      if (!skip.empty() && skip[a][v]) continue;
+      const bool skipped = !skip.empty() && skip[a][v];
+      if (skipped && passed == nullptr) continue;
       const Vec3 &p0 = before[a][v], &p1 = after[a][v];
       if (!finite(p0) || !finite(p1)) continue;
       const Box box{p0.cwiseMin(p1), p0.cwiseMax(p1)};
@@ -786,9 +788,11 @@ std::size_t CrossingCounter::tunnelledVertices(const std::vector<CrossingMesh>& 
         const auto& x1 = after[b];
         tunnelled = vertexTunnels(p0, p1, x0[tri[0]], x0[tri[1]], x0[tri[2]], x1[tri[0]], x1[tri[1]], x1[tri[2]]);
       });
-      count += tunnelled;
+      count += tunnelled && !skipped;
+      all += tunnelled;
     }
   }
+  if (passed != nullptr) *passed = all;
   return count;
 }
 

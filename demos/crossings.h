@@ -78,9 +78,11 @@ class CrossingCounter {
 
   /// Vertices v of some body A for which vertexTunnels holds against at least one triangle of a
   /// body B ≠ A between `before` and `after`, leaving out the vertices with skip[A][v] ≠ 0 (skip
-  /// may be empty: none left out).
+  /// may be empty: none left out). With `passed`, it also receives the count of all such vertices,
+  /// those with skip[A][v] ≠ 0 included.
   std::size_t tunnelledVertices(const std::vector<CrossingMesh>& meshes, const BodyPositions& before,
-                                const BodyPositions& after, const std::vector<std::vector<char>>& skip);
+                                const BodyPositions& after, const std::vector<std::vector<char>>& skip,
+                                std::size_t* passed = nullptr);
 
  private:
   using Box = testkit::Box;

@@ -155,6 +155,7 @@ nlohmann::ordered_json toJson(const RunResult& r) {
   j["intersections_max"] = r.intersections_max;
   j["intersections_steps"] = r.intersections_steps;
   j["tunnelled_vertices"] = {{"total", r.tunnelled_total}, {"worst_step", r.tunnelled_worst_step}};
+  j["passed_vertices"] = {{"total", r.passed_total}, {"worst_step", r.passed_worst_step}};
   j["self_collision"] = r.self_collision;
   if (r.pipeline != Pipeline::Bullet && r.self_collision) j["self_rest_bound"] = r.self_rest_bound;
   j["self_intersections_max"] = r.self_intersections_max;

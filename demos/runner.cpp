@@ -597,7 +597,8 @@ void Run::measureAfterStep(StepRecord& rec, bool penetration) {
     // No thread to be had: this thread does it all.
   }
   rec.n.edge_crossings = crossings_.edgeCrossings(crossing_meshes_, after_);
-  rec.n.tunnelled_vertices = crossings_.tunnelledVertices(crossing_meshes_, before_, after_, had_contact_);
+  rec.n.tunnelled_vertices =
+      crossings_.tunnelledVertices(crossing_meshes_, before_, after_, had_contact_, &rec.n.passed_vertices);
   rec.n.self_edge_crossings = selfCounts(crossings_);
   rec.n.self_edge_crossings += helper.valid() ? helper.get() : second();
   after_current_ = true;
@@ -727,6 +728,8 @@ void summariseCounts(RunResult& r) {
     r.self_contacts_outside_truth += n.self_outside_truth;
     r.tunnelled_total += n.tunnelled_vertices;
     r.tunnelled_worst_step = std::max(r.tunnelled_worst_step, n.tunnelled_vertices);
+    r.passed_total += n.passed_vertices;
+    r.passed_worst_step = std::max(r.passed_worst_step, n.passed_vertices);
     r.cluster_contacts_total += n.cluster_contacts;
     r.self_cluster_contacts_total += n.self_cluster_contacts;
   }

@@ -194,6 +194,8 @@ struct RunResult {
   /// Vertices that passed through another body's triangle during a step without a soft-soft contact
   /// (StepCounts::tunnelled_vertices): summed over the steps, and the most in one step.
   std::size_t tunnelled_total = 0, tunnelled_worst_step = 0;
+  /// The same over all vertices, with a contact or not (StepCounts::passed_vertices).
+  std::size_t passed_total = 0, passed_worst_step = 0;
   /// First step after which a node position was non-finite or absurdly far out (1000 scene
   /// extents): the simulation blew up and the run stopped there; -1 = it did not.
   long diverged_at_step = -1;

@@ -87,6 +87,8 @@ struct StepCounts {
   /// Vertices whose path over the step passed through a moving triangle of another body, of those
   /// that had no soft-soft contact in the step (crossings.h).
   std::size_t tunnelled_vertices = 0;
+  /// The same of all vertices, those with a contact included: passages the contacts did not stop.
+  std::size_t passed_vertices = 0;
   /// Bullet's cluster runs: contacts (joints) its cluster collision made between bodies during
   /// collision detection, and of a body with itself in the self pass.
   std::size_t cluster_contacts = 0, self_cluster_contacts = 0;

@@ -106,6 +106,9 @@ TEST(DemoCli, JsonAndCsvHaveTheAgreedKeys) {
     const nlohmann::json& tunnelled = r.at("tunnelled_vertices");
     EXPECT_LE(tunnelled.at("worst_step").get<long>(), tunnelled.at("total").get<long>()) << pipeline;
     EXPECT_EQ(tunnelled.at("worst_step").get<long>() > 0, tunnelled.at("total").get<long>() > 0) << pipeline;
+    const nlohmann::json& passed = r.at("passed_vertices");
+    EXPECT_GE(passed.at("total").get<long>(), tunnelled.at("total").get<long>()) << pipeline;
+    EXPECT_GE(passed.at("worst_step").get<long>(), tunnelled.at("worst_step").get<long>()) << pipeline;
     EXPECT_GE(num(r, "crossings_ms_mean"), 0.0) << pipeline;
     // Self crossings are counted whatever the options; the self truth only with --self-collision.
     EXPECT_EQ(r.at("self_intersections_max").get<int>() > 0, r.at("self_intersections_steps").get<int>() > 0);

@@ -138,6 +138,9 @@ TEST(Count, TunnelledVerticesCountEachVertexOnceAndSkipContacts) {
   EXPECT_EQ(tunnelledVerticesBruteForce(meshes, before, after, {}), 1u);
   const std::vector<std::vector<char>> skip = {{0, 0, 0}, {1, 0, 0}};  // it had a contact
   EXPECT_EQ(counter.tunnelledVertices(meshes, before, after, skip), 0u);
+  std::size_t passed = 0;  // ... and passed all the same
+  EXPECT_EQ(counter.tunnelledVertices(meshes, before, after, skip, &passed), 0u);
+  EXPECT_EQ(passed, 1u);
   // Stopping short of the triangle is no tunnelling.
   after[1][0] = {0.2, 0.2, 0.05};
   EXPECT_EQ(counter.tunnelledVertices(meshes, before, after, {}), 0u);
@@ -242,6 +245,9 @@ TEST(Grid, EqualsBruteForceOnRandomMeshes) {
     for (const auto* skip : {&r.skip, &none}) {
       const std::size_t brute = tunnelledVerticesBruteForce(r.meshes, r.before, r.after, *skip);
       EXPECT_EQ(counter.tunnelledVertices(r.meshes, r.before, r.after, *skip), brute) << what;
+      std::size_t passed = 0;  // every vertex's passage, whatever it skips
+      EXPECT_EQ(counter.tunnelledVertices(r.meshes, r.before, r.after, *skip, &passed), brute) << what;
+      EXPECT_EQ(passed, tunnelledVerticesBruteForce(r.meshes, r.before, r.after, none)) << what;
       tunnelled_seen += brute;
     }
   }
