@@ -340,9 +340,15 @@ namespace {
 
 [[noreturn]] void badMargin(const std::string& label, double margin) {
   std::ostringstream s;
-  s << label << ": margin = " << margin << " must be finite and not negative";
+  s << label << ": margin = " << margin << " must be finite, not negative and at most " << kMaxCoordinate
+    << " (the coordinates' range)";
   throw Error(ErrorCode::InvalidSettings, s.str());
 }
+
+/// A margin the midphase can square and sum: within [0, kMaxCoordinate] (a review's finding, stop
+/// 46: above about 1e154 the squared radii overflowed, one pair came out twice and then the hash
+/// grid's cell size was infinite, with no body named).
+bool validMargin(double margin) { return std::isfinite(margin) && margin >= 0.0 && margin <= kMaxCoordinate; }
 
 // Validates a body description completely and builds its topology; nothing is partitioned yet.
 std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
@@ -350,7 +356,7 @@ std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
   b->id = id;
   b->name = desc.name;
   const std::string label = b->label();
-  if (!std::isfinite(desc.margin) || desc.margin < 0.0) badMargin(label, desc.margin);
+  if (!validMargin(desc.margin)) badMargin(label, desc.margin);
   try {
     b->topology.emplace(desc.triangles, desc.positions.size());
   } catch (const Error& e) {
@@ -378,6 +384,21 @@ std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
     throw Error(ErrorCode::InvalidArgument, label + ": the given convex parts label " +
                                                 std::to_string(desc.parts->part_of.size()) + " vertices, not " +
                                                 std::to_string(desc.positions.size()));
+  if (desc.parts) {
+    // Checked here, naming the body, rather than by the particle budget at the next step (a review's
+    // finding, stop 46: that error named the body's index in the budget and every step threw).
+    const ConvexParts& cp = *desc.parts;
+    if (cp.parts.empty()) throw Error(ErrorCode::InvalidArgument, label + ": the given convex parts are empty");
+    for (std::size_t k = 0; k < cp.parts.size(); ++k)
+      if (!(std::isfinite(cp.parts[k].radius) && cp.parts[k].radius >= 0.0 && cp.parts[k].center.allFinite()))
+        throw Error(ErrorCode::InvalidArgument, label + ": convex part " + std::to_string(k) +
+                                                    " has a non-finite or negative radius or centre");
+    for (std::size_t v = 0; v < cp.part_of.size(); ++v)
+      if (cp.part_of[v] >= cp.parts.size())
+        throw Error(ErrorCode::InvalidArgument, label + ": vertex " + std::to_string(v) + " is labelled part " +
+                                                    std::to_string(cp.part_of[v]) + " of " +
+                                                    std::to_string(cp.parts.size()));
+  }
   b->positions = desc.positions;
   b->previous = desc.previous;
   b->margin = desc.margin;
@@ -464,7 +485,7 @@ void SensorWorld::setPositions(BodyId id, const PositionView& positions, const P
 
 void SensorWorld::setMargin(BodyId id, double margin) {
   Body& b = impl_->get(id);
-  if (!std::isfinite(margin) || margin < 0.0) badMargin(b.label(), margin);
+  if (!validMargin(margin)) badMargin(b.label(), margin);
   b.margin = margin;
 }
 

@@ -167,8 +167,10 @@ void BodyRegistry::update(btSoftBody& body, Record& record, psc::SensorWorld& se
     return;
   }
   if (record.id == psc::kInvalidBody) {
+    // A margin set anew may be a valid one again (a review's finding, stop 46: a body rejected for a
+    // negative margin stayed out after it was set back).
     const bool changed = dirty || !print.sameMesh(record.print) || print.nodes != record.print.nodes ||
-                         (record.nonfinite && nodesFinite(body));
+                         marginOf(body) != record.margin || (record.nonfinite && nodesFinite(body));
     if (changed) {
       add(body, record, sensors, counters);
     } else {
@@ -196,6 +198,7 @@ void BodyRegistry::update(btSoftBody& body, Record& record, psc::SensorWorld& se
     if (sensors.hasBody(record.id)) sensors.removeBody(record.id);
     record.id = psc::kInvalidBody;
     record.print = print;
+    record.margin = marginOf(body);  // the margin it was rejected with: another one is offered again
     record.rejection = error.what();
     countRejected(record.rejection, counters);
   }

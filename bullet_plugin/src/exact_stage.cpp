@@ -18,6 +18,8 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <cstdint>
+#include <string>
 #include <vector>
 
 namespace psc::bullet {
@@ -522,6 +524,18 @@ ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody&
                               const psc::CandidatePair* first, const psc::CandidatePair* last, ContactSet contacts) {
   ExactCounts counts;
   if (first == last) return counts;
+  // Every index in range, checked before any is read (a review's finding, stop 46: candidates of
+  // an earlier step used after a body's arrays shrank read past them).
+  bool out_of_range = false;
+  const auto node_count = static_cast<std::uint64_t>(node_body.m_nodes.size());
+  const auto face_count = static_cast<std::uint64_t>(face_body.m_faces.size());
+  for (const psc::CandidatePair* c = first; c != last; ++c)
+    out_of_range |= (std::uint64_t{c->vertex} >= node_count) | (std::uint64_t{c->triangle} >= face_count);
+  if (out_of_range)
+    throw psc::Error(psc::ErrorCode::InvalidArgument,
+                     "collideCandidates: a candidate's node or face index is beyond the bodies' m_nodes (" +
+                         std::to_string(node_count) + ") or m_faces (" + std::to_string(face_count) +
+                         "): candidates of another step or another body");
   const int before = node_body.m_scontacts.size();
   counts.tests = static_cast<std::size_t>(last - first);
   bool lanes = false;

@@ -192,8 +192,11 @@ bool Installation::collide(btSoftBody& a, btSoftBody& b) noexcept {
   try {
     senseOncePerStep();
     if (!step_ok_) return false;
-    const std::optional<psc::BodyId> id_a = registry_.idOf(&a);
-    const std::optional<psc::BodyId> id_b = registry_.idOf(&b);
+    // Only bodies the sensor world still sees as they are: a dispatch between steps (a manual
+    // performDiscreteCollisionDetection, contactTest) after a body's arrays changed must not use
+    // this step's candidates for it (a review's finding, stop 46). Bullet's algorithm takes it.
+    const std::optional<psc::BodyId> id_a = registry_.currentIdOf(a);
+    const std::optional<psc::BodyId> id_b = registry_.currentIdOf(b);
     if (!id_a || !id_b || *id_a == *id_b) return false;
     collidePair(a, *id_a, b, *id_b);
     return true;
@@ -315,7 +318,8 @@ void Installation::collideUndispatchedPairs() {
     if (collided_pairs_.count(key) != 0) continue;
     btSoftBody* a = registry_.bodyOf(vb);
     btSoftBody* b = registry_.bodyOf(tb);
-    if (a == nullptr || b == nullptr || a->getBroadphaseHandle() == nullptr || b->getBroadphaseHandle() == nullptr)
+    if (a == nullptr || b == nullptr || a->getBroadphaseHandle() == nullptr || b->getBroadphaseHandle() == nullptr ||
+        registry_.currentIdOf(*a) != vb || registry_.currentIdOf(*b) != tb)
       continue;
     if (!cache->needsBroadphaseCollision(a->getBroadphaseHandle(), b->getBroadphaseHandle()) ||
         !dispatcher_.needsCollision(a, b))
@@ -353,7 +357,7 @@ void Installation::collideSelfPairs() {
     if (!sensors_.selfCollision(id)) continue;
     btSoftBody* body = registry_.bodyOf(id);
     const auto range = candidatesOf(candidates, id, id);
-    if (body == nullptr || range.first == range.second) continue;
+    if (body == nullptr || range.first == range.second || registry_.currentIdOf(*body) != id) continue;
     const auto start = std::chrono::steady_clock::now();
     const auto radius = static_cast<btScalar>(sensors_.selfRadius(id));
     const int before = body->m_scontacts.size();

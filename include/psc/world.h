@@ -26,7 +26,7 @@ struct BodyDesc {
   PositionView positions;
   /// Positions at the previous step (optional): gives the motion term of the contact radius.
   PositionView previous;
-  double margin = 0.0;            ///< collision margin of this body, length units (≥ 0)
+  double margin = 0.0;            ///< collision margin of this body, length units (0 to kMaxCoordinate)
   std::size_t particles = 0;      ///< > 0: override the particle budget
   bool deformable = true;         ///< false: a rigid mesh, never checked for repartitioning
   /// Also hand over (vertex, triangle) pairs of this body with itself (SensorWorld::setSelfCollision).

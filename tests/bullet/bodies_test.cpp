@@ -169,6 +169,76 @@ TEST(Bodies, ABodyWithoutFacesIsSkippedNotFatal) {
   (void)ball;
 }
 
+TEST(Bodies, ADispatchBetweenStepsAfterABodyChangedUsesNoCandidateOfTheStep) {
+  // A review's finding (stop 46): two overlapping balls whose pair the collision filter keeps
+  // apart during the step (the sensors still give it candidates); after the step the second's
+  // faces are cut to one, it is filtered in and refreshed, and the program dispatches between
+  // steps. The plugin took the step's candidates for the pair, whose face indices now lie past
+  // m_faces. It now hands a body changed since the step's sensing to Bullet's algorithm.
+  SoftWorld w(0);
+  btSoftBody* a = w.addSoft(psc::makeSphere(0.5, 1000));
+  psc::TriMesh m = psc::makeSphere(0.5, 1000);
+  m.translate({0.9, 0, 0});
+  btSoftBody* b = w.addSoft(m);
+  w.world.removeSoftBody(b);
+  w.world.addSoftBody(b, 4, 4);  // a group the others' mask leaves out
+  auto plugin = psc::bullet::install(w.world);
+  w.step();
+  EXPECT_GT(plugin.stats().candidate_pairs, 0u) << "the sensors see the pair";
+  EXPECT_EQ(a->m_scontacts.size() + b->m_scontacts.size(), 0) << "the filter keeps it apart";
+  const std::size_t tests = plugin.stats().exact_tests;
+  w.world.removeSoftBody(b);
+  const btSoftBody::Face kept = b->m_faces[0];
+  b->m_faces.clear();
+  b->m_faces.push_back(kept);
+  b->initializeFaceTree();  // Bullet's own face tree, which its algorithm reads
+  w.world.addSoftBody(b);
+  plugin.refreshBody(b);
+  w.world.performDiscreteCollisionDetection();
+  EXPECT_EQ(plugin.stats().exact_tests, tests) << "no candidate of the step was used";
+  EXPECT_TRUE(plugin.stats().error.empty()) << plugin.stats().error;
+  EXPECT_GE(plugin.stats().fallback_pairs, 1u) << "the pair went to Bullet's algorithm";
+  // The next step senses the changed body afresh and takes the pair again.
+  w.step();
+  EXPECT_TRUE(plugin.stats().error.empty()) << plugin.stats().error;
+  EXPECT_EQ(plugin.stats().bodies, 2u);
+  EXPECT_EQ(plugin.stats().fallback_pairs, 0u);
+}
+
+TEST(Bodies, ABodyRejectedForItsMarginIsTakenBackOnceItIsValid) {
+  // A review's finding (stop 46): a body whose margin became negative was left out (rightly), but
+  // when the margin was set back it stayed out with the old reason, on Bullet's algorithm; with
+  // OptIn::Explicit and no VF_SS flag, two touching balls then had no contact at all.
+  for (const bool explicit_opt_in : {false, true}) {
+    SoftWorld w(0);
+    SoftParams sp;
+    sp.vf_ss = !explicit_opt_in;
+    btSoftBody* a = w.addSoft(psc::makeSphere(0.5, 200), sp);
+    psc::TriMesh m = psc::makeSphere(0.5, 200);
+    m.translate({0.98, 0, 0});
+    btSoftBody* b = w.addSoft(m, sp);
+    psc::bullet::Settings settings;
+    if (explicit_opt_in) settings.opt_in = psc::bullet::OptIn::Explicit;
+    auto plugin = psc::bullet::install(w.world, settings);
+    if (explicit_opt_in) {
+      plugin.setEnabled(a, true);
+      plugin.setEnabled(b, true);
+    }
+    w.step();
+    EXPECT_EQ(plugin.stats().bodies, 2u);
+    a->getCollisionShape()->setMargin(btScalar(-0.01));
+    w.step();
+    EXPECT_EQ(plugin.stats().skipped_bodies, 1u);
+    EXPECT_NE(plugin.stats().skipped_reason.find("margin"), std::string::npos) << plugin.stats().skipped_reason;
+    a->getCollisionShape()->setMargin(btScalar(0.02));
+    w.step();
+    EXPECT_EQ(plugin.stats().bodies, 2u) << (explicit_opt_in ? "explicit" : "VF_SS");
+    EXPECT_EQ(plugin.stats().skipped_bodies, 0u);
+    EXPECT_TRUE(plugin.stats().skipped_reason.empty()) << plugin.stats().skipped_reason;
+    EXPECT_GT(a->m_scontacts.size() + b->m_scontacts.size(), 0) << "the touching balls have contacts again";
+  }
+}
+
 TEST(Bodies, ABodyWhoseNodesBecomeNonFiniteIsLeftOutAndTheOthersKeepTheirContacts) {
   // A far body gets a NaN node mid-run. The core cannot step it; before, that sent every pair back
   // to Bullet's algorithm, and with OptIn::Explicit (no VF_SS on the bodies) every soft–soft

@@ -309,6 +309,46 @@ TEST(BadMesh, CoordinatesBeyondTheLimitAreRejected) {
   EXPECT_ERROR_NAMES(w.step(), "ok", "vertex 7");
 }
 
+TEST(BadSettings, MarginsBeyondTheCoordinatesRangeAreRejectedNamingTheBody) {
+  // A review's finding (stop 46): a margin of 1e155 was taken, its squares overflowed and a pair
+  // came out twice in one step; 1e308 made every step throw about the hash grid's cell size, with
+  // no body named. Margins are now held to the coordinates' range, at addBody and at setMargin.
+  Body b = bodyOf(makeSphere(1.0, 100), "ball");
+  b.margin = 1e155;
+  SensorWorld w;
+  EXPECT_ERROR_NAMES(w.addBody(descOf(b)), "ball", "margin");
+  b.margin = 0.02;
+  const BodyId id = w.addBody(descOf(b));
+  EXPECT_ERROR_NAMES(w.setMargin(id, 1e308), "ball", "margin");
+  EXPECT_ERROR_NAMES(w.setMargin(id, std::numeric_limits<double>::infinity()), "ball", "margin");
+  w.setMargin(id, kMaxCoordinate);  // the range's edge is a margin
+  w.setMargin(id, 0.02);
+  EXPECT_NO_THROW(w.step());
+}
+
+TEST(BadMesh, GivenConvexPartsAreCheckedWhenTheBodyIsAdded) {
+  // A review's finding (stop 46): convex parts with a NaN radius, none at all or labels out of
+  // range were taken, and the next step threw, naming the body's place in the particle budget.
+  const Body b = bodyOf(makeSphere(1.0, 100), "ball");
+  const auto withParts = [&](const std::function<void(ConvexParts&)>& spoil) {
+    auto parts = std::make_shared<ConvexParts>();
+    parts->parts.push_back(ConvexPart{Vec3::Zero(), 1.0, b.mesh.vertices.size()});
+    parts->part_of.assign(b.mesh.vertices.size(), 0);
+    spoil(*parts);
+    BodyDesc d = descOf(b);
+    d.parts = parts;
+    return d;
+  };
+  SensorWorld w;
+  EXPECT_ERROR_NAMES(w.addBody(withParts([](ConvexParts& p) { p.parts[0].radius = std::nan(""); })), "ball",
+                     "part 0");
+  EXPECT_ERROR_NAMES(w.addBody(withParts([](ConvexParts& p) { p.parts.clear(); })), "ball", "empty");
+  EXPECT_ERROR_NAMES(w.addBody(withParts([](ConvexParts& p) { p.part_of[5] = 3; })), "ball", "vertex 5");
+  EXPECT_TRUE(w.bodyIds().empty());
+  w.addBody(withParts([](ConvexParts&) {}));
+  EXPECT_NO_THROW(w.step());
+}
+
 TEST(BadMesh, IndexOutOfRangeNamesTriangleAndIndex) {
   Body b = bodyOf(makeSphere(1.0, 100), "ball");
   b.mesh.triangles[3][1] = 100000;

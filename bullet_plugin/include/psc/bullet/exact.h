@@ -67,7 +67,8 @@ struct ExactCounts {
 /// With ContactSet::NearestFace, of each node's contacts of this call only the discrete one
 /// nearest to the node (|m_x − the face point at the contact's weights|, in btScalar; the first of
 /// equals) and its crossing contacts stay, in candidate order; ExactCounts::reduced counts the rest.
-/// The candidates' indices must be valid for the bodies' m_nodes / m_faces, and their positions
+/// The candidates' indices must be valid for the bodies' m_nodes / m_faces (psc::Error otherwise,
+/// before any contact is made), and their positions
 /// and margins finite (the plugin leaves a body with a non-finite node out of the sensors, so no
 /// candidate of it comes here; exactContact checks it per pair).
 ExactCounts collideCandidates(ExactTest test, btSoftBody& node_body, btSoftBody& face_body,
