@@ -80,7 +80,7 @@ int main(int argc, char** argv) {
   app.add_option("--steps", steps, "simulation steps (default: the scene's)")->check(CLI::Range(1, 10000000));
   app.add_option("--seed", params.seed, "placement seed (default 1)");
   app.add_option("--scale", params.scale,
-                 "multiply every length by this (default 1); Bullet's exact test skips triangles of area "
+                 "multiply every length by this (default 1; 1e-6 to 1e6); Bullet's exact test skips triangles of area "
                  "below 1.7e-4 units^2, so very fine meshes need a larger scale")
       ->check(CLI::PositiveNumber);
   app.add_option("--pipeline", pipeline,

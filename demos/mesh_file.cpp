@@ -140,7 +140,13 @@ void checkHeader(const std::string& path, std::uintmax_t size) {
   std::istringstream words(first);
   words >> first;
   if (first.size() >= 3 && first.compare(first.size() - 3, 3, "OFF") == 0) {
-    std::istringstream rest(head);
+    // The counts are the first words after "OFF"; comment lines ("#" to the end of a line) may come
+    // between (a review's finding, stop 46: a comment hid the counts from this check, and a 28-byte
+    // file made assimp take 2.7 GB).
+    std::istringstream lines(head);
+    std::string uncommented, line;
+    while (std::getline(lines, line)) uncommented += line.substr(0, line.find('#')) + "\n";
+    std::istringstream rest(uncommented);
     std::string skip, nv, nf;
     if (rest >> skip >> nv >> nf) {
       checkCount(path, size, "vertices", nv);

@@ -9,6 +9,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <sstream>
 
 namespace psc::demo {
 namespace {
@@ -513,8 +514,15 @@ Scene makeScene(const std::string& key, const SceneParams& asked) {
   else s = meshDrop(p, bodyCount(p, *info));
   s.name = n;
   s.default_steps = info->default_steps;
-  if (!(p.scale > 0.0) || !std::isfinite(p.scale))
-    throw badParam("scale " + std::to_string(p.scale) + " must be a positive finite number");
+  // Within [kMinScale, kMaxScale]: beyond it single-precision Bullet's squared lengths and
+  // volumes leave float's range and the scene diverges at its first step (a review's finding,
+  // stop 46: --scale 1e308 and 1e-300 ran, reported a divergence and exited 0).
+  if (!(p.scale >= kMinScale && p.scale <= kMaxScale)) {
+    std::ostringstream what;
+    what << "scale " << p.scale << " is outside [" << kMinScale << ", " << kMaxScale
+         << "]: single-precision Bullet's squared lengths and volumes would leave float's range";
+    throw badParam(what.str());
+  }
   if (p.scale != 1.0) {
     // Lengths ×k with the same dt: velocities and accelerations ×k as well. Bullet's volume force
     // grows as area × volume (k⁵) against an acceleration that grows as k, hence kVC × k⁻⁴; the

@@ -26,6 +26,9 @@ struct SceneParams {
   double scale = 1.0;
 };
 
+/// The range of SceneParams::scale the scenes accept (makeScene throws outside it).
+inline constexpr double kMinScale = 1e-6, kMaxScale = 1e6;
+
 /// A soft body: a triangle mesh and Bullet material numbers (btSoftBody::Config / Material).
 struct SoftBodySpec {
   std::string name;

@@ -469,6 +469,19 @@ TEST(DemoCli, WithoutTruthTheRecallKeysAreLeftOut) {
   EXPECT_TRUE(doc["runs"][0].contains("collision_ms_median"));
 }
 
+TEST(DemoCli, AScaleBeyondFloatsRangeIsRefusedNamingTheRange) {
+  // A review's finding (stop 46): --scale 1e308 and 1e-300 ran, reported a divergence at the first
+  // step and exited 0.
+  for (const char* scale : {"1e308", "1e-300", "2e6"}) {
+    const Outcome o = run(std::string("--scene head_on --resolution 60 --steps 2 --truth none --pipeline bullet --scale ") +
+                          scale);
+    EXPECT_TRUE(o.exited && o.code != 0) << scale << ": " << o.output;
+    EXPECT_NE(o.output.find("is outside [1e-06, 1e+06]"), std::string::npos) << o.output;
+  }
+  const Outcome edge = run("--scene head_on --resolution 60 --steps 2 --truth none --pipeline bullet --scale 1e6");
+  EXPECT_TRUE(edge.exited && edge.code == 0) << edge.output;
+}
+
 TEST(DemoCli, ListsScenesAndRejectsUnknownOnes) {
   const Outcome list = run("--list-scenes");
   ASSERT_TRUE(list.exited && list.code == 0) << list.output;
@@ -504,10 +517,12 @@ TEST(DemoCli, BrokenMeshFilesGiveAClearErrorAndNonZeroExit) {
     std::ofstream(dir / "points_only.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\np 1\np 2\n";
     // A count with letters after it: assimp reads its digits (scripts/fuzz: 64 GB asked for).
     std::ofstream(dir / "count_with_letters.off") << "OFF\n4 4444440441510191ply 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n";
+    // A comment before the counts hid them from the header check (a review, stop 46: 2.7 GB).
+    std::ofstream(dir / "comment_then_count.off") << "OFF\n# comment\n200000000 1 0\n0 0 0\n";
     std::ofstream(dir / "empty.stl");
   }
   for (const char* f : {"garbage.obj", "truncated.off", "huge_count.ply", "unterminated.ply", "end_header_vt.ply",
-                        "points_only.obj", "count_with_letters.off", "empty.stl"})
+                        "points_only.obj", "count_with_letters.off", "comment_then_count.off", "empty.stl"})
     files.push_back((dir / f).string());
   files.push_back((dir / "does_not_exist.obj").string());
   files.push_back(dir.string());
