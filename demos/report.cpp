@@ -39,8 +39,8 @@ std::string fixed(double v, int digits) {
   return buf;
 }
 
-/// A recall: "none" where its truth was empty (kNoTruth).
-std::string recallText(double v, int digits) { return std::isnan(v) ? "none" : fixed(v, digits); }
+/// A recall, or "none" where its truth was empty (`truth` 0: nothing to find).
+std::string recallText(double v, std::size_t truth, int digits) { return truth == 0 ? "none" : fixed(v, digits); }
 
 /// Keeps 3 significant digits for small times and whole numbers for large ones.
 std::string ms(double v) {
@@ -256,11 +256,13 @@ void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
                 "pen n", "cross", "self-x", "self rec", "MB");
   out << line;
   for (const RunResult& r : runs) {
-    const std::string strict =
-        r.has_strict ? recallText(r.recall_strict, 4) + "/" + recallText(r.recall_strict_worst_step, 3) : "-";
-    const std::string full =
-        r.has_full ? recallText(r.recall_full, 4) + "/" + recallText(r.recall_full_worst_step, 3) : "-";
-    const std::string pairs = (r.has_strict || r.has_full) ? recallText(r.pair_recall, 3) : "-";
+    const std::string strict = r.has_strict ? recallText(r.recall_strict, r.truth_strict_total, 4) + "/" +
+                                                  recallText(r.recall_strict_worst_step, r.truth_strict_total, 3)
+                                            : "-";
+    const std::string full = r.has_full ? recallText(r.recall_full, r.truth_full_total, 4) + "/" +
+                                              recallText(r.recall_full_worst_step, r.truth_full_total, 3)
+                                        : "-";
+    const std::string pairs = (r.has_strict || r.has_full) ? recallText(r.pair_recall, r.truth_pairs_total, 3) : "-";
     const std::string outside = r.has_full ? count(double(r.contacts_outside_truth)) : "-";
     const std::string flagged = r.has_sensor_figures ? count(r.flagged_pairs_per_step) : "-";
     // Bullet's collision mean over this run's, on the rows of our pipelines.
@@ -268,7 +270,8 @@ void printTable(std::ostream& out, const std::vector<RunResult>& runs) {
                                : r.pipeline == Pipeline::Bounds ? r.ratio_bullet_over_bounds
                                                                 : 0.0;
     const std::string ratio = b_over_ours > 0 ? fixed(b_over_ours, 2) : "";
-    const std::string self_recall = r.has_self_truth ? recallText(r.self_recall_strict, 4) : "-";
+    const std::string self_recall =
+        r.has_self_truth ? recallText(r.self_recall_strict, r.self_truth_strict_total, 4) : "-";
     std::snprintf(line, sizeof line, head, r.scene.c_str(), std::to_string(r.resolution).c_str(),
                   std::to_string(r.bodies).c_str(), std::to_string(r.steps).c_str(), name_width, runName(r).c_str(), strict.c_str(),
                   full.c_str(), pairs.c_str(), outside.c_str(), count(r.exact_tests_per_step).c_str(), flagged.c_str(),

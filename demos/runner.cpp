@@ -734,15 +734,16 @@ void summariseCounts(RunResult& r) {
     r.self_cluster_contacts_total += n.self_cluster_contacts;
   }
   const double steps = static_cast<double>(r.steps);
-  // A recall over an empty truth is undefined, not 1: kNoTruth (null in the JSON, "none" in the
-  // table), so that a run with nothing to find never reads as a run that found everything.
-  const auto recall = [](std::size_t found, std::size_t truth) { return truth ? double(found) / double(truth) : kNoTruth; };
+  // Over an empty truth a recall is 1 (no true contact was lost) in the JSON, beside the truth's
+  // size; the table prints "none" there, so that a run with nothing to find never reads as one that
+  // found everything (printTable).
+  const auto recall = [](std::size_t found, std::size_t truth) { return truth ? double(found) / double(truth) : 1.0; };
   r.recall_strict = recall(r.found_in_strict, r.truth_strict_total);
   r.recall_full = recall(r.found_in_full, r.truth_full_total);
-  r.recall_strict_worst_step = r.truth_strict_total ? worst_strict : kNoTruth;
+  r.recall_strict_worst_step = worst_strict;
   r.recall_strict_testable = recall(r.found_in_strict - r.found_in_strict_untestable,
                                     r.truth_strict_total - r.truth_strict_untestable);
-  r.recall_full_worst_step = r.truth_full_total ? worst_full : kNoTruth;
+  r.recall_full_worst_step = worst_full;
   r.self_recall_strict = recall(r.self_found_in_strict, r.self_truth_strict_total);
   r.self_recall_strict_all = recall(r.self_found_in_strict_all, r.self_truth_strict_all_total);
   r.pair_recall = recall(r.truth_pairs_found, r.truth_pairs_total);

@@ -101,10 +101,6 @@ struct RunOptions {
 
 /// Everything a run measured, summarised from its per-step records. Fields that do not apply are
 /// flagged by the has_* members.
-/// A recall whose truth is empty (RunResult): undefined, written null in the JSON and "none" in
-/// the table.
-inline constexpr double kNoTruth = std::numeric_limits<double>::quiet_NaN();
-
 struct RunResult {
   std::string scene, scene_number, title, note;
   std::string series = "scenes";  ///< which group of runs: "scenes", "sweep_resolution", "sweep_bodies"
@@ -124,7 +120,7 @@ struct RunResult {
   /// Bullet's cluster runs: cluster contacts (joints) made between bodies and of a body with
   /// itself, summed over the steps (StepCounts::cluster_contacts, self_cluster_contacts).
   std::size_t cluster_contacts_total = 0, self_cluster_contacts_total = 0;
-  /// The recalls below are kNoTruth (NaN) where their truth is empty: nothing to find.
+  /// The recalls below are 1 where their truth is empty (nothing was lost); the table prints "none".
   bool has_strict = false, has_full = false;
   double recall_strict = 1.0, recall_full = 1.0;
   double recall_strict_worst_step = 1.0, recall_full_worst_step = 1.0;
