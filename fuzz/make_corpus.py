@@ -71,12 +71,20 @@ ply = (b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty flo
 stl = (b"solid t\n facet normal 0 0 -1\n  outer loop\n   vertex 0 0 0\n   vertex 0 1 0\n   vertex 1 0 0\n"
        b"  endloop\n endfacet\n facet normal 0 -1 0\n  outer loop\n   vertex 0 0 0\n   vertex 1 0 0\n"
        b"   vertex 0 0 1\n  endloop\n endfacet\nendsolid t\n")
+ply_binary = (b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+              b"property float z\nelement face 4\nproperty list uchar int vertex_indices\nend_header\n"
+              + struct.pack('<12f', 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1)
+              + b"".join(struct.pack('<B3i', 3, *f) for f in [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]))
+coff = (b"COFF # colours\n4 4 6\n0 0 0 1 0 0 1\n1 0 0 0 1 0 1\n0 1 0 0 0 1 1\n0 0 1 1 1 1 1\n"
+        b"3 0 2 1 255 0 0\n3 0 1 3\n4 0 3 2 2\n3 1 2 3\n")
 binary_stl = b"\0" * 80 + struct.pack('<I', 1) + struct.pack('<12f', 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0) + b"\0\0"
 # Extension byte: index into kExtensions of fuzz_mesh_file.cpp (obj off ply stl dae 3ds x bin).
 mesh_file = {
     'tetra_obj': bytes([0]) + obj,
     'tetra_off': bytes([1]) + off,
     'tetra_ply': bytes([2]) + ply,
+    'tetra_ply_binary': bytes([2]) + ply_binary,
+    'coff_colours': bytes([1]) + coff,
     'two_facets_stl': bytes([3]) + stl,
     'one_facet_binary_stl': bytes([3]) + binary_stl,
     'obj_lines_only': bytes([0]) + b"v 0 0 0\nv 1 0 0\nl 1 2\n",
