@@ -648,9 +648,58 @@ void checkOff(const std::string& path, std::string data, bool body) {
   }
 }
 
+// ---- STL ------------------------------------------------------------------------------------
+// assimp 5.2's ASCII STL reader (LoadASCIIFile) takes the positions of its "vertex" lines in order
+// and cuts them into triangles by threes: a facet with a fourth vertex loses it with only a log
+// line (a quad becomes a triangle and leaves a hole), and a facet with fewer than three shifts
+// every later triangle onto the next facet's corners (only a total that is not a multiple of three
+// fails). Every facet must have exactly three vertices.
+
+/// Whether assimp reads the file as a binary STL (IsBinarySTL: the facet count at byte 80 gives
+/// the file's size exactly, in 32-bit arithmetic as there).
+bool binaryStl(const std::string& data) {
+  if (data.size() < 84) return false;
+  std::uint32_t facets = 0;
+  std::memcpy(&facets, data.data() + 80, 4);
+  return static_cast<std::uint32_t>(facets * 50u + 84u) == data.size();
+}
+
+void checkAsciiStl(const std::string& path, const std::string& data) {
+  if (binaryStl(data)) return;
+  // assimp's tokens: words between blanks and line ends; "facet" opens a facet, "vertex" adds a
+  // corner to it (before any facet assimp skips it), "endsolid" ends the solid.
+  const auto space = [](char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\f' || c == '\0'; };
+  std::size_t facet = 0, corners = 3, facet_at = 0;
+  bool open = false;
+  const auto close = [&] {
+    if (open && corners != 3)
+      throw fileError(path, "STL facet " + std::to_string(facet - 1) + " (line " + std::to_string(lineOf(data, facet_at)) +
+                                ") has " + std::to_string(corners) + " vertices; a facet has exactly 3");
+    open = false;
+  };
+  for (std::size_t p = 0; p < data.size();) {
+    while (p < data.size() && space(data[p])) ++p;
+    const std::size_t b = p;
+    while (p < data.size() && !space(data[p])) ++p;
+    const std::string_view w = std::string_view(data).substr(b, p - b);
+    if (w == "facet") {
+      close();
+      open = true;
+      corners = 0;
+      facet_at = b;
+      ++facet;
+    } else if (w == "vertex") {
+      if (open) ++corners;
+    } else if (w.substr(0, 8) == "endsolid") {
+      close();
+    }
+  }
+  close();
+}
+
 /// Headers are checked before assimp reads the file: OFF and PLY element counts must fit the file,
 /// a PLY header must end (see checkPlyHeader), and the bodies are scanned for what assimp 5.2 would
-/// allocate too much for (PLY lists) or load wrongly without failing (OFF faces).
+/// allocate too much for (PLY lists) or load wrongly without failing (OFF faces, ASCII STL facets).
 void checkHeader(const std::string& path, std::uintmax_t size) {
   std::ifstream in(path, std::ios::binary);
   std::string head(kHeaderBytes, '\0');
@@ -673,7 +722,11 @@ void checkHeader(const std::string& path, std::uintmax_t size) {
   std::istringstream words(first);
   words >> first;
   const bool off_word = first.size() >= 3 && first.compare(first.size() - 3, 3, "OFF") == 0;
-  if (ext == ".off" || start == "off" || off_word) checkOff(path, readFile(path, size), ext == ".off" || start == "off");
+  if (ext == ".off" || start == "off" || off_word) return checkOff(path, readFile(path, size), ext == ".off" || start == "off");
+  // assimp reads a file as STL by its extension, or by a "solid" or "STL" near its start.
+  std::size_t lead = 0;
+  while (lead < head.size() && std::isspace(static_cast<unsigned char>(head[lead]))) ++lead;
+  if (ext == ".stl" || head.compare(lead, 5, "solid") == 0) checkAsciiStl(path, readFile(path, size));
 }
 
 }  // namespace

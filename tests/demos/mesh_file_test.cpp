@@ -1,7 +1,7 @@
 // The mesh-file loader's checks before assimp (demos/mesh_file.cpp), called directly so that each
 // case can be matched to its message: binary and ASCII PLY list lengths bounded by what the file
-// holds, OFF faces that assimp 5.2 would only log, and the files of those formats that assimp
-// reads correctly still loading.
+// holds, OFF faces and ASCII STL facets that assimp 5.2 would only log, and the files of those
+// formats that assimp reads correctly still loading.
 #include "mesh_file.h"
 
 #include "psc/error.h"
@@ -232,6 +232,42 @@ TEST(MeshFile, OffFilesThatAssimpReadsCorrectlyStillLoad) {
       EXPECT_GT(loadMeshFile(file).triangles.size(), 0u) << file;
     }
   }
+}
+
+/// An ASCII STL facet of the given corners.
+std::string stlFacet(const std::vector<const char*>& corners) {
+  std::string f = "  facet normal 0 0 1\n    outer loop\n";
+  for (const char* c : corners) f += std::string("      vertex ") + c + "\n";
+  return f + "    endloop\n  endfacet\n";
+}
+
+TEST(MeshFile, AsciiStlFacetsNeedExactlyThreeVertices) {
+  const std::string a = "0 0 0", b = "1 0 0", c = "0 1 0", d = "1 1 0";
+  const std::string two = stlFacet({a.c_str(), b.c_str(), c.c_str()}) + stlFacet({b.c_str(), d.c_str(), c.c_str()});
+  EXPECT_EQ(triangles("two.stl", "solid two\n" + two + "endsolid two\n"), 2u);
+  // Two solids in one file, and a file named otherwise that assimp takes for STL by its "solid".
+  EXPECT_EQ(triangles("solids", "solid a\n" + two + "endsolid a\nsolid b\n" + two + "endsolid b\n"), 4u);
+  // A quad: assimp 5.2 kept its first three corners with only a log line (a hole in the mesh).
+  EXPECT_REFUSED("quad.stl", "solid q\n" + stlFacet({a.c_str(), b.c_str(), d.c_str(), c.c_str()}) + "endsolid q\n",
+                 "STL facet 0 (line 2) has 4 vertices; a facet has exactly 3");
+  // Facets of two corners, three of them: six positions, which assimp cut into two triangles made
+  // of corners of different facets, without a word.
+  const std::string short_facet = stlFacet({a.c_str(), b.c_str()});
+  EXPECT_REFUSED("short.stl", "solid s\n" + stlFacet({a.c_str(), b.c_str(), c.c_str()}) + short_facet + short_facet +
+                                  short_facet + "endsolid s\n",
+                 "STL facet 1 (line 9) has 2 vertices");
+  // The last facet, cut off by the end of the file.
+  EXPECT_REFUSED("cut.stl", "solid s\n" + two + "  facet normal 0 0 1\n    outer loop\n      vertex 0 0 0\n",
+                 "STL facet 2 (line 16) has 1 vertices");
+  // A binary STL (its facet count gives the file's size) is not scanned as text.
+  std::string binary(84, '\0');
+  std::memcpy(binary.data(), "solid but binary", 16);
+  const std::uint32_t facets = 1;
+  std::memcpy(binary.data() + 80, &facets, 4);
+  const float facet[12] = {0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0};
+  binary.append(reinterpret_cast<const char*>(facet), sizeof facet);
+  binary.append(2, '\0');
+  EXPECT_EQ(triangles("binary.stl", binary), 1u);
 }
 
 }  // namespace
