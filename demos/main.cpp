@@ -127,7 +127,7 @@ int main(int argc, char** argv) {
   app.add_option("--frames", frames, "write a VTK series per run into DIR (open the .pvd in ParaView)");
   app.add_option("--frame-every", frame_every, "with --frames: every n-th step (default 1)")->check(CLI::Range(1, 1000000));
   app.add_option("--plot", plot_dir, "write PNG plots into DIR (needs gnuplot)");
-  app.add_option("--warmup", warmup, "steps left out of the timing means and medians (default min(10, steps/10))");
+  app.add_option("--warmup", warmup, "steps left out of the timing means and medians (default min(10, max(1, steps/10)))");
   CLI::Option* self_flag = app.add_flag("--self-collision", self_collision,
                "self-collision on every body of our pipelines (Bullet's own has none), and the self truth "
                "(self_recall_strict) for every pipeline");
