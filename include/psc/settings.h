@@ -72,7 +72,9 @@ struct SensorSettings {
   /// largest region box diagonal (two touching regions have their particles closer than the sum
   /// of their diameters, so they always feel each other, and each particle only looks at its
   /// neighbourhood; the thesis uses the largest distance between initial particles).
-  /// Always clamped above the largest μ.
+  /// Always clamped above the largest μ of a resting body (mu_edge_factor × its mean edge + twice
+  /// its margin); the thesis mode's μ grows with motion beyond that (motion_factor · |Δx|), and its
+  /// flagging grid takes the larger of the two, but the pull reaches only R_eff.
   double r_eff = 0.0;
   /// Movement rounds per step before giving up (≥ 1) when the particles move until stable; a hit
   /// is counted in StepStats::round_cap_hits.
