@@ -69,6 +69,9 @@ TEST(BlockAlignment, BlocksOfEitherAllocatorAreFreedByTheOther) {
 }
 
 TEST(BlockAlignment, NodesOfABodyCreatedAfterItHaveTheirPositionsOnOneLine) {
+  // With double-precision Bullet m_x and m_q are 32 bytes each from offset 16 of the node: 64
+  // bytes that no alignment of the array puts on one line.
+  if (sizeof(btScalar) != sizeof(float)) GTEST_SKIP() << "m_x and m_q span two lines in double-precision Bullet";
   DefaultAllocatorAfter restore;
   psc::bullet::alignLargeBulletBlocks();
   psc_test::SoftWorld w;
