@@ -342,6 +342,9 @@ struct Body {
 
   // Partition state; valid when `partitioned`.
   bool partitioned = false;
+  /// Made by SensorWorld::replaceMesh and not partitioned since: its first partition is a
+  /// repartition of the body (repartitions, StepStats::repartitions).
+  bool replaced = false;
   std::size_t budget = 0;
   Partition partition;                 ///< its region_of is dropped and rebuilt like `topology`
   RegionLists regions;                 ///< built only for Flagging::Sensors (thesis candidate sets)

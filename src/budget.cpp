@@ -411,8 +411,13 @@ ConvexParts decomposeConvex(const MeshTopology& topology, const PositionView& po
     }
   }
 
-  // Compact labels, numbered by first appearance over original vertex order (deterministic).
-  std::vector<Index> compact(proxy_label.size() + 1, kInvalidIndex);
+  // Compact labels, numbered by first appearance over original vertex order (deterministic). The
+  // labels are cluster numbers, which can exceed the proxy's vertex count (HACD asked for more
+  // clusters than the proxy has vertices: a large min_parts).
+  Index largest_label = 0;
+  for (const Index l : proxy_label)
+    if (l != kInvalidIndex) largest_label = std::max(largest_label, l);
+  std::vector<Index> compact(static_cast<std::size_t>(largest_label) + 1, kInvalidIndex);
   std::vector<bool> labelled(m, false);
   Index parts = 0;
   for (std::size_t v = 0; v < m; ++v) {

@@ -110,7 +110,8 @@ struct SensorWorld::Impl {
 };
 
 void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
-  const bool again = b.partitioned;
+  const bool again = b.partitioned || b.replaced;
+  b.replaced = false;
   const MeshTopology& topology = b.fullTopology();
   b.partition = partitionLBG(topology, b.positions, count, settings.partition);
   // The thesis's candidate sets need per-region lists; the bounds layer needs only the chunks.
@@ -181,9 +182,13 @@ void SensorWorld::Impl::preparePartitions(StepStats& stats) {
     const std::size_t cap = b.particle_override > 0
                                 ? b.vertices_in_triangles
                                 : std::max<std::size_t>(1, b.vertices_in_triangles / settings.min_region_vertices);
-    const std::size_t count = std::clamp<std::size_t>(budget[k++], 1, cap);
+    std::size_t count = std::clamp<std::size_t>(budget[k++], 1, cap);
+    // The thesis's LBG doubles the codebook: with any_count off the count is a power of two, the
+    // largest one within the budget.
+    if (!settings.partition.any_count)
+      while ((count & (count - 1)) != 0) count &= count - 1;
     if (!b.partitioned || count != b.budget) {
-      const bool again = b.partitioned;
+      const bool again = b.partitioned || b.replaced;
       forBody(b, [&] { partitionBody(b, count); });
       if (again) ++stats.repartitions;
     }
@@ -351,7 +356,10 @@ namespace {
 bool validMargin(double margin) { return std::isfinite(margin) && margin >= 0.0 && margin <= kMaxCoordinate; }
 
 // Validates a body description completely and builds its topology; nothing is partitioned yet.
-std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
+/// `fit_particles`: a particle count beyond the vertices that lie in triangles is kept and used as
+/// that many (replaceMesh keeps a count given at addBody, and a finer mesh later gets it all)
+/// instead of refused.
+std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc, bool fit_particles = false) {
   auto b = std::make_unique<Body>();
   b->id = id;
   b->name = desc.name;
@@ -376,7 +384,7 @@ std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
   }
   for (Index v = 0; v < b->topology->vertexCount(); ++v)
     if (!b->topology->vertexTriangles(v).empty()) ++b->vertices_in_triangles;
-  if (desc.particles > b->vertices_in_triangles)
+  if (desc.particles > b->vertices_in_triangles && !fit_particles)
     throw Error(ErrorCode::InvalidSettings, label + ": particles = " + std::to_string(desc.particles) +
                                                 " exceeds the " + std::to_string(b->vertices_in_triangles) +
                                                 " vertices that lie in triangles");
@@ -402,7 +410,7 @@ std::unique_ptr<Body> makeBody(BodyId id, const BodyDesc& desc) {
   b->positions = desc.positions;
   b->previous = desc.previous;
   b->margin = desc.margin;
-  b->particle_override = desc.particles;
+  b->particle_override = desc.particles;  // used at most vertices_in_triangles (preparePartitions)
   b->deformable = desc.deformable;
   b->parts = desc.parts;
   if (desc.self_collision) {
@@ -424,7 +432,11 @@ void checkSelfCollisionMode(const SensorSettings& settings, const std::string& l
 }  // namespace
 
 BodyId SensorWorld::addBody(const BodyDesc& desc) {
-  if (desc.self_collision) checkSelfCollisionMode(impl_->settings, desc.name.empty() ? "addBody" : "body '" + desc.name + "'");
+  const std::string label = desc.name.empty() ? "addBody" : "body '" + desc.name + "'";
+  if (desc.self_collision) checkSelfCollisionMode(impl_->settings, label);
+  if (!impl_->settings.partition.any_count && desc.particles > 0 && (desc.particles & (desc.particles - 1)) != 0)
+    throw Error(ErrorCode::InvalidSettings, label + ": particles = " + std::to_string(desc.particles) +
+                                                " is not a power of two, which partition.any_count off needs");
   const BodyId id = impl_->next_id;
   impl_->bodies.emplace(id, makeBody(id, desc));
   ++impl_->next_id;
@@ -523,12 +535,14 @@ void SensorWorld::replaceMesh(BodyId id, std::vector<Triangle> triangles, const 
   desc.positions = positions;
   desc.previous = previous;
   desc.margin = old.margin;
+  // A count given at addBody stays; a coarser mesh with fewer vertices in triangles gets one a vertex.
   desc.particles = old.particle_override;
   desc.deformable = old.deformable;
   desc.self_collision = old.selfCollides();  // the new mesh's positions become its rest shape
   desc.name = old.name;
-  std::unique_ptr<Body> fresh = makeBody(id, desc);  // the old body stays if this throws
-  fresh->repartitions = old.repartitions + 1;
+  std::unique_ptr<Body> fresh = makeBody(id, desc, true);  // the old body stays if this throws
+  fresh->repartitions = old.repartitions;  // the next step's partition of it counts as one
+  fresh->replaced = true;
   impl_->bodies[id] = std::move(fresh);
   impl_->membership_changed = true;
 }

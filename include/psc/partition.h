@@ -19,7 +19,9 @@ struct PartitionSettings {
   double epsilon = 0.005;        ///< Lloyd stop: (D_prev − D)/D_prev ≤ ε; also the split step. (0, 1)
   double normal_weight = 0.5;    ///< w: weight of the normal block in the 6-D feature. ≥ 0
   bool scale_free = true;        ///< [beyond] positions divided by the bounding radius (thesis: raw)
-  bool any_count = true;         ///< [beyond] split the worst cluster until the count (thesis: 2^k)
+  bool any_count = true;         ///< [beyond] split the worst cluster until the count (thesis: 2^k;
+                                 ///< off, a SensorWorld gives each body the largest power of two
+                                 ///< within its budget, and a BodyDesc::particles must be one)
   bool connect_regions = true;   ///< [beyond] reassign islands to the neighbour region sharing most edges
   int max_lloyd_iterations = 100;  ///< per split level; hitting it is reported in Partition
 };

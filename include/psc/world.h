@@ -166,7 +166,10 @@ class SensorWorld {
   /// one). Ignored with the other motion bounds and in the thesis's mode. Throws for unknown ids.
   void setPairAhead(BodyId a, BodyId b, bool ahead);
   bool pairAhead(BodyId a, BodyId b) const;
-  /// The mesh itself changed (vertex count, triangles): rebuilds the topology and repartitions.
+  /// The mesh itself changed (vertex count, triangles): rebuilds the topology and repartitions
+  /// (at the next step(), which counts it in StepStats::repartitions and repartitionCount). A
+  /// particle count given at addBody stays; a mesh with fewer vertices in triangles than that gets
+  /// one particle a vertex.
   void replaceMesh(BodyId id, std::vector<Triangle> triangles, const PositionView& positions,
                    const PositionView& previous = {});
 

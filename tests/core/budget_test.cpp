@@ -111,6 +111,30 @@ TEST(Budget, EveryVertexIsLabelledAndInsideItsPart) {
   }
 }
 
+TEST(Budget, AMinimumPartCountAboveTheVertexCountLabelsEveryVertex) {
+  // A review's finding (stop 47): HACD asked for more clusters than the (proxy) mesh has vertices
+  // numbers them beyond the vertex count, and the labels' compaction table was sized by the vertex
+  // count: a heap overflow (AddressSanitizer) and garbage parts. Small meshes and large ones (whose
+  // decimated proxy has about 130 vertices) alike.
+  for (const TriMesh& m : {makeTorus(1.0, 0.3, 100), makeUShape(1.0, 1.0, 0.2, 120), makeTorus(1.0, 0.3, 2000)}) {
+    for (std::size_t min_parts : {60u, 100u, 140u, 400u}) {
+      const MeshTopology topology(m.triangles, m.vertices.size());
+      DecompositionSettings settings;
+      settings.min_parts = min_parts;
+      const ConvexParts parts = decomposeConvex(topology, PositionView::of(m.vertices), settings);
+      ASSERT_EQ(parts.part_of.size(), m.vertices.size());
+      std::size_t counted = 0;
+      for (const ConvexPart& p : parts.parts) counted += p.vertex_count;
+      EXPECT_EQ(counted, m.vertices.size()) << m.vertices.size() << " vertices, min_parts " << min_parts;
+      for (std::size_t v = 0; v < m.vertices.size(); ++v) {
+        ASSERT_LT(parts.part_of[v], parts.parts.size()) << "vertex " << v << ", min_parts " << min_parts;
+        const ConvexPart& p = parts.parts[parts.part_of[v]];
+        EXPECT_LE((m.vertices[v] - p.center).norm(), p.radius * (1.0 + 1e-12));
+      }
+    }
+  }
+}
+
 TEST(Budget, DecompositionIsDeterministic) {
   for (const TriMesh& m : {makeTorus(1.0, 0.3, 5000), makeFork(4.0, 0.2, 800), makeUShape(2.0, 1.5, 0.3, 200)}) {
     const ConvexParts a = decompose(m), b = decompose(m);

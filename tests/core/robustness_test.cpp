@@ -1130,6 +1130,70 @@ TEST(HardConditions, StretchedToTwiceItsSizeRepartitionsAndStillFindsContacts) {
   EXPECT_GT(contacts, 0u);
 }
 
+TEST(HardConditions, AReplacedMeshIsCountedAsOneRepartitionWhenItIsPartitioned) {
+  // A review's finding (stop 47): replaceMesh raised repartitionCount at once, and the next step,
+  // which partitions the new mesh, did not count it in StepStats::repartitions.
+  std::vector<Body> bodies = againstSphere(makeSphere(1.0, 200), 0.02);
+  SensorWorld w;
+  addAll(w, bodies);
+  EXPECT_EQ(w.step().stats.repartitions, 0u);
+  bodies[0].mesh = makeSphere(1.0, 500);
+  w.replaceMesh(bodies[0].id, bodies[0].mesh.triangles, PositionView::of(bodies[0].mesh.vertices));
+  EXPECT_EQ(w.repartitionCount(bodies[0].id), 0u) << "not partitioned yet";
+  EXPECT_EQ(w.step().stats.repartitions, 1u);
+  EXPECT_EQ(w.repartitionCount(bodies[0].id), 1u);
+  EXPECT_EQ(w.step().stats.repartitions, 0u);
+  EXPECT_EQ(w.repartitionCount(bodies[0].id), 1u);
+}
+
+TEST(HardConditions, AGivenParticleCountSurvivesAReplacementByACoarserMesh) {
+  // A review's finding (stop 47): a body added with particles = 60 could not be replaced by a mesh
+  // of fewer vertices (replaceMesh threw and kept the old mesh). It now gets one particle a vertex,
+  // and the 60 again once the mesh is fine enough.
+  std::vector<Body> bodies = againstSphere(makeSphere(1.0, 400), 0.02);
+  bodies[0].particles = 60;
+  SensorWorld w;
+  addAll(w, bodies);
+  stepAndCheck(w, bodies, 1, "before");
+  EXPECT_EQ(w.partition(bodies[0].id).regionCount(), 60u);
+  bodies[0].mesh = makeSphere(1.0, 38);
+  ASSERT_LT(bodies[0].mesh.vertices.size(), 60u);
+  w.replaceMesh(bodies[0].id, bodies[0].mesh.triangles, PositionView::of(bodies[0].mesh.vertices));
+  stepAndCheck(w, bodies, 2, "coarse");
+  EXPECT_EQ(w.partition(bodies[0].id).regionCount(), bodies[0].mesh.vertices.size());
+  bodies[0].mesh = makeSphere(1.0, 400);
+  w.replaceMesh(bodies[0].id, bodies[0].mesh.triangles, PositionView::of(bodies[0].mesh.vertices));
+  stepAndCheck(w, bodies, 1, "fine again");
+  EXPECT_EQ(w.partition(bodies[0].id).regionCount(), 60u);
+}
+
+TEST(HardConditions, TheThesissPowerOfTwoCountsWorkInAWorld) {
+  // A review's finding (stop 47): with partition.any_count off (the thesis's 2^k), every step threw
+  // once a body's budget was not a power of two. Each body now gets the largest power of two within
+  // its budget, and a given count must be one.
+  SensorSettings s;
+  s.partition.any_count = false;
+  std::vector<Body> bodies = againstSphere(makeTorus(1.0, 0.3, 800), 0.02);
+  std::vector<Body> more = againstSphere(makeSphere(1.0, 300), 0.02);
+  more[0].mesh.translate(Vec3(0, 4, 0));
+  more[1].mesh.translate(Vec3(0, 4, 0));
+  bodies.push_back(more[0]);
+  bodies.push_back(more[1]);
+  SensorWorld w(s);
+  addAll(w, bodies);
+  EXPECT_GT(stepAndCheck(w, bodies, 3, "any_count off"), 0u);
+  for (const Body& b : bodies) {
+    const std::size_t n = w.partition(b.id).regionCount();
+    EXPECT_EQ(n & (n - 1), 0u) << b.name << ": " << n << " regions";
+  }
+  BodyDesc odd = descOf(bodies[0]);
+  odd.particles = 6;
+  odd.name = "six";
+  EXPECT_ERROR_NAMES(w.addBody(odd), "six': particles = 6 is not a power of two");
+  odd.particles = 8;
+  EXPECT_NO_THROW(w.addBody(odd));
+}
+
 TEST(HardConditions, ReplacedMeshWithAnotherVertexCountIsRepartitioned) {
   std::vector<Body> bodies = againstSphere(makeSphere(1.0, 200), 0.02);
   SensorWorld w;
