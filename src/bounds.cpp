@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <type_traits>
 #include <unordered_map>
 
@@ -2165,6 +2166,71 @@ struct Group {
   }
 };
 
+/// The regions of one body whose grown boxes meet a given box, without reading every region: the
+/// boxes sorted by their low end along the body's longest axis, so a query reads only the regions
+/// whose span along that axis can reach the box. Each body pair asks it of both bodies' regions
+/// against the other's box; with one body of many regions (a soft floor of thousands under a
+/// thousand small bodies) reading them all made that bodies × regions a step (a review's finding,
+/// stop 47). Bodies of few regions are read in full, as before. The result is the same set, in
+/// ascending region order, either way.
+class RegionIndex {
+ public:
+  /// Below this many regions a body's regions are read in full.
+  static constexpr Index kIndexedRegions = 64;
+
+  RegionIndex(const Body& X, double motion_factor) {
+    const Index n = static_cast<Index>(X.regionCount());
+    boxes_.reserve(n);
+    for (Index r = 0; r < n; ++r) boxes_.push_back(grown(X.region_box[r], X.margin, motion_factor));
+    if (n < kIndexedRegions) return;
+    axis_ = longestAxis(X.body_box.lo, X.body_box.hi);
+    by_lo_.reserve(n);
+    for (Index r = 0; r < n; ++r) {
+      const Grown& g = boxes_[r];
+      // A NaN or an empty box is kept out of the sort (it would break its order) and read in full.
+      if (!(g.lo[axis_] <= g.hi[axis_])) {
+        loose_.push_back(r);
+        continue;
+      }
+      by_lo_.push_back({g.lo[axis_], r});
+      longest_ = std::max(longest_, g.hi[axis_] - g.lo[axis_]);
+    }
+    std::sort(by_lo_.begin(), by_lo_.end());
+    indexed_ = true;
+  }
+
+  const Grown& box(Index r) const { return boxes_[r]; }
+
+  /// The regions whose grown box overlaps `other`, ascending, into `out` (cleared first).
+  void overlapping(const Grown& other, std::vector<Index>& out) const {
+    out.clear();
+    if (!indexed_) {
+      for (Index r = 0; r < static_cast<Index>(boxes_.size()); ++r)
+        if (overlap(boxes_[r], other)) out.push_back(r);
+      return;
+    }
+    // A region that meets `other` starts at most its own length before other.lo along the axis;
+    // twice the longest length leaves room for the rounding of the lengths. The test itself is
+    // the same overlap() as the full read's.
+    const double from = other.lo[axis_] - 2.0 * longest_;
+    auto it = std::lower_bound(by_lo_.begin(), by_lo_.end(), std::make_pair(from, Index(0)));
+    if (!(from == from)) it = by_lo_.begin();  // a NaN query: read them all (none overlaps)
+    for (; it != by_lo_.end() && !(it->first > other.hi[axis_]); ++it)
+      if (overlap(boxes_[it->second], other)) out.push_back(it->second);
+    for (const Index r : loose_)
+      if (overlap(boxes_[r], other)) out.push_back(r);
+    std::sort(out.begin(), out.end());
+  }
+
+ private:
+  std::vector<Grown> boxes_;
+  bool indexed_ = false;
+  int axis_ = 0;
+  double longest_ = 0.0;
+  std::vector<std::pair<double, Index>> by_lo_;
+  std::vector<Index> loose_;
+};
+
 class Collector {
  public:
   Collector(const CullParams& p, std::vector<FlaggedPair>& flagged, StepStats& c)
@@ -2183,9 +2249,11 @@ class Collector {
     const int ax = longestAxis(boxA.lo.cwiseMax(boxB.lo), boxA.hi.cwiseMin(boxB.hi));
     const auto regionItems = [&](const Body& X, const Grown& other, std::vector<SweepItem>& items) {
       items.clear();
-      for (Index r = 0; r < X.regionCount(); ++r) {
-        const Grown g = grown(X.region_box[r], X.margin, params_.motion_factor);
-        if (overlap(g, other)) items.push_back({g.lo[ax], g.hi[ax], r});
+      const RegionIndex& index = regionIndex(X);
+      index.overlapping(other, region_hits_);
+      for (const Index r : region_hits_) {
+        const Grown& g = index.box(r);
+        items.push_back({g.lo[ax], g.hi[ax], r});
       }
     };
     regionItems(A, boxB, s_.items_a);
@@ -2617,6 +2685,14 @@ class Collector {
   Scratch s_;
   std::vector<std::pair<Index, Index>> region_pairs_, chunk_pairs_;
   std::vector<Grown> self_boxes_;
+  /// Each body's region boxes, made at its first pair of the step.
+  const RegionIndex& regionIndex(const Body& X) {
+    auto it = region_index_.find(X.id);
+    if (it == region_index_.end()) it = region_index_.emplace(X.id, RegionIndex(X, params_.motion_factor)).first;
+    return it->second;
+  }
+  std::unordered_map<BodyId, RegionIndex> region_index_;
+  std::vector<Index> region_hits_;
 };
 
 }  // namespace
@@ -2651,12 +2727,15 @@ std::vector<std::vector<char>> regionsNearOtherBodies(const std::vector<Body*>& 
                                                       const CullParams& params) {
   std::vector<std::vector<char>> near(bodies.size());
   for (std::size_t i = 0; i < bodies.size(); ++i) near[i].assign(bodies[i]->regionCount(), 0);
+  // Each body's region boxes, made at its first pair (RegionIndex: not every region per pair).
+  std::vector<std::optional<RegionIndex>> index(bodies.size());
+  std::vector<Index> hits;
   for (const auto& [i, j] : pairs)
     for (const auto& [x, y] : {std::pair<Index, Index>{i, j}, std::pair<Index, Index>{j, i}}) {
-      const Body& X = *bodies[x];
+      if (!index[x]) index[x].emplace(*bodies[x], params.motion_factor);
       const Grown other = grown(bodies[y]->body_box, bodies[y]->margin, params.motion_factor);
-      for (Index r = 0; r < X.regionCount(); ++r)
-        if (overlap(grown(X.region_box[r], X.margin, params.motion_factor), other)) near[x][r] = 1;
+      index[x]->overlapping(other, hits);
+      for (const Index r : hits) near[x][r] = 1;
     }
   return near;
 }

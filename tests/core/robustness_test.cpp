@@ -1194,6 +1194,38 @@ TEST(HardConditions, TheThesissPowerOfTwoCountsWorkInAWorld) {
   EXPECT_NO_THROW(w.addBody(odd));
 }
 
+TEST(HardConditions, AFloorOfManyRegionsUnderManySmallBodiesLosesNoContact) {
+  // A review's finding (stop 47): each body pair read every region of both bodies, so a floor of
+  // thousands of regions under a thousand small bodies cost bodies × regions a step. The regions
+  // of a body of many (RegionIndex::kIndexedRegions and more) are now found through their boxes
+  // sorted along the body's longest axis; the candidates must be those of the full read, every
+  // contact within the radius among them (brute force), and two worlds must agree bit for bit.
+  std::vector<Body> bodies;
+  Body floor;
+  floor.mesh = makePatch(8.0, 8.0, 40, 40);  // in the z = 0 plane, about (−4, −4) to (4, 4)
+  floor.name = "floor";
+  floor.particles = 200;
+  floor.margin = 0.02;
+  bodies.push_back(floor);
+  for (int i = 0; i < 5; ++i)
+    for (int j = 0; j < 5; ++j) {
+      Body ball;
+      ball.mesh = makeSphere(0.3, 60).translate(Vec3(-3.1 + 1.5 * i, -3.1 + 1.5 * j, 0.3 - 0.01 * ((i + j) % 4)));
+      ball.name = "ball";
+      ball.margin = 0.02;
+      bodies.push_back(ball);
+    }
+  SensorWorld w, twin;
+  addAll(w, bodies);
+  std::vector<Body> copy = bodies;
+  addAll(twin, copy);
+  EXPECT_GT(stepAndCheck(w, bodies, 3, "floor"), 0u);
+  for (int s = 0; s < 3; ++s) twin.step();
+  EXPECT_GE(w.partition(bodies[0].id).regionCount(), 64u) << "the floor's regions must be indexed";
+  EXPECT_EQ(w.lastResult().candidates, twin.lastResult().candidates);
+  EXPECT_EQ(w.lastResult().stats.region_pairs, twin.lastResult().stats.region_pairs);
+}
+
 TEST(HardConditions, ReplacedMeshWithAnotherVertexCountIsRepartitioned) {
   std::vector<Body> bodies = againstSphere(makeSphere(1.0, 200), 0.02);
   SensorWorld w;
