@@ -93,7 +93,9 @@ struct SensorWorld::Impl {
     return settings.flagging == Flagging::Sensors || settings.repartition.estimator == AreaEstimator::FourDirectionWalk;
   }
 
-  void partitionBody(Body& b, std::size_t count);
+  /// Partitions b into `count` regions; returns whether that was a repartition (the body had a
+  /// partition, or its mesh was replaced since).
+  bool partitionBody(Body& b, std::size_t count);
   void preparePartitions(StepStats& stats);
   void refitAndCheck(Body& b, StepStats& stats);
   /// Whether the refit carries b's self-collision part (the rest-shape bound and the self motion
@@ -109,7 +111,7 @@ struct SensorWorld::Impl {
   const std::vector<Index>& ringOf(std::size_t particle, const Body& b, Index region, Index v);
 };
 
-void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
+bool SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
   const bool again = b.partitioned || b.replaced;
   b.replaced = false;
   const MeshTopology& topology = b.fullTopology();
@@ -142,6 +144,7 @@ void SensorWorld::Impl::partitionBody(Body& b, std::size_t count) {
   // Bodies are checked on staggered steps so the O(M) checks do not all land on one step.
   b.steps_since_check = static_cast<int>(b.id % static_cast<BodyId>(settings.repartition.check_every));
   if (again) ++b.repartitions;
+  return again;
 }
 
 namespace {
@@ -188,8 +191,8 @@ void SensorWorld::Impl::preparePartitions(StepStats& stats) {
     if (!settings.partition.any_count)
       while ((count & (count - 1)) != 0) count &= count - 1;
     if (!b.partitioned || count != b.budget) {
-      const bool again = b.partitioned || b.replaced;
-      forBody(b, [&] { partitionBody(b, count); });
+      bool again = false;
+      forBody(b, [&] { again = partitionBody(b, count); });
       if (again) ++stats.repartitions;
     }
   }
